@@ -1,0 +1,48 @@
+# focas-edge — every target sets itself up: a fresh clone needs only python3.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+
+.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test,dev]'
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+## make run: a simulated fleet, a broker (system one, or an embedded one), the daemon and a live view
+run: $(STAMP)
+	$(PY) -m edge.demo
+
+## make test: lint, then the whole suite (unit + integration with a real mosquitto)
+test: $(STAMP) broker-check lint
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check edge tests bench
+	$(VENV)/bin/mypy
+
+unit: $(STAMP)
+	$(PY) -m pytest -q tests/unit
+
+integration: $(STAMP) broker-check
+	$(PY) -m pytest -q tests/integration
+
+broker-check:
+	@bash scripts/ensure-mosquitto.sh
+
+sim: $(STAMP)
+	$(VENV)/bin/focas-edge sim --machines 3
+
+bench: $(STAMP) broker-check
+	$(PY) -m bench
+
+fuzz: $(STAMP)
+	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q tests -k "property or fuzz"
+
+clean:
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis

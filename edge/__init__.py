@@ -1,0 +1,13 @@
+"""focas-edge: FANUC FOCAS/Ethernet edge collector publishing Sparkplug B 3.0 and JSON over MQTT."""
+
+__version__ = "0.1.0"
+
+
+class ConfigError(Exception):
+    """The configuration is invalid; `problems` lists every finding as 'path: message'."""
+
+    def __init__(self, problems: list[str], source: str = "config") -> None:
+        self.problems = list(problems)
+        self.source = source
+        lines = "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(f"{source}: {len(self.problems)} problem(s):\n{lines}")

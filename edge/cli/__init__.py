@@ -1,0 +1,61 @@
+"""The focas-edge command: one module per subcommand, each with a register(subparsers) function.
+
+Exit codes for every subcommand: 0 all ok, 1 a CNC or network error, 2 bad usage or bad config.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from edge import __version__
+
+# Subcommand modules in the order `--help` lists them. Each defines
+#   register(subparsers) -> None   adding its parser with set_defaults(func=handler)
+# where handler(args) -> int returns the exit code.
+SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "watch", "check_config"]
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="focas-edge",
+        description="Edge collector for FANUC CNCs: FOCAS/Ethernet to MQTT (Sparkplug B 3.0 and JSON).",
+    )
+    parser.add_argument("--version", action="version", version=f"focas-edge {__version__}")
+    parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING or ERROR (default INFO)")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f"edge.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"edge.cli.{name}":
+                continue
+            raise
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=getattr(logging, str(args.log_level).upper(), logging.INFO),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_USAGE
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())
