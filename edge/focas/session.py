@@ -178,29 +178,29 @@ class CncSession(abc.ABC):
         return result
 
     async def read_sysinfo(self) -> SysInfo:
-        return await self.read(it.ReadSysInfo())  # type: ignore[no-any-return]
+        return await self.read(it.ReadSysInfo())
 
     async def read_status(self) -> StatInfo:
-        return await self.read(it.ReadStatus())  # type: ignore[no-any-return]
+        return await self.read(it.ReadStatus())
 
     async def read_macros(self, first: int, last: int | None = None) -> list[float | None]:
-        return await self.read(it.ReadMacros(first, first if last is None else last))  # type: ignore[no-any-return]
+        return await self.read(it.ReadMacros(first, first if last is None else last))
 
     async def read_pmc(self, area: str, start: int, end: int,
                        data_type: PmcType = PmcType.BYTE) -> list[int | float]:
-        return await self.read(it.ReadPmc(area, start, end, data_type))  # type: ignore[no-any-return]
+        return await self.read(it.ReadPmc(area, start, end, data_type))
 
     async def read_params(self, first: int, last: int | None = None, axis: int = 0) -> list[ParamRecord]:
-        return await self.read(it.ReadParams(first, first if last is None else last, axis))  # type: ignore[no-any-return]
+        return await self.read(it.ReadParams(first, first if last is None else last, axis))
 
     async def read_diag(self, first: int, last: int | None = None, axis: int = 0) -> list[ParamRecord]:
-        return await self.read(it.ReadDiag(first, first if last is None else last, axis))  # type: ignore[no-any-return]
+        return await self.read(it.ReadDiag(first, first if last is None else last, axis))
 
     async def read_clock(self) -> datetime:
-        return await self.read(it.ReadClock())  # type: ignore[no-any-return]
+        return await self.read(it.ReadClock())
 
     async def read_alarm_history(self, depth: int = 100) -> list[AlarmHistoryEntry]:
-        return await self.read(it.ReadAlarmHistory(depth))  # type: ignore[no-any-return]
+        return await self.read(it.ReadAlarmHistory(depth))
 
     # ---- writes ----------------------------------------------------------------------------------
     async def write_macro(self, number: int, value: float) -> None:
