@@ -112,7 +112,8 @@ class CncError(FocasError):
             text += f", detail {detail}"
         if message:
             text += f": {message}"
-        super().__init__(text)
+        # Not super(): in FunctionNotAvailable the next class in the MRO is NotSupported(operation, reason).
+        FocasError.__init__(self, text)
 
 
 class FunctionNotAvailable(CncError, NotSupported):

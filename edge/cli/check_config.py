@@ -1,0 +1,67 @@
+"""`focas-edge check-config FILE`: validate a config file without connecting to anything.
+
+Exit 0 with a short summary of what the daemon would do; exit 2 with every problem listed, each with
+its path in the file. Warnings (values that were adjusted) are printed either way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from edge import ConfigError
+from edge.cli import EXIT_OK, EXIT_USAGE
+from edge.config import Config, load_config
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "check-config", help="validate a config file without connecting",
+        description="Validate a focas-edge YAML config: every problem is listed with its path in the file. "
+                    "Secrets named by password_env/password_file must be available, as they must be for run.",
+        epilog="Exit codes: 0 valid, 2 invalid (every problem listed).")
+    parser.add_argument("config", metavar="FILE", help="the YAML config file")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print nothing when the file is valid")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        config = load_config(args.config)
+    except ConfigError as exc:
+        print(f"{args.config}: invalid, {len(exc.problems)} problem(s):", file=sys.stderr)
+        for problem in exc.problems:
+            print(f"  {problem}", file=sys.stderr)
+        return EXIT_USAGE
+    for warning in config.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    if not args.quiet:
+        print(summary(config, args.config))
+    return EXIT_OK
+
+
+def summary(config: Config, source: str) -> str:
+    mqtt = config.mqtt
+    lines = [f"{source}: valid"]
+    broker = f"{mqtt.host}:{mqtt.effective_port}{' (TLS)' if mqtt.tls else ''}, MQTT {mqtt.protocol}"
+    lines.append(f"  broker     {broker}, formats {', '.join(mqtt.formats)}")
+    if mqtt.sparkplug is not None:
+        sp = mqtt.sparkplug
+        host = f", primary host {sp.primary_host_id}" if sp.primary_host_id else ""
+        lines.append(f"  sparkplug  spBv1.0/{sp.group_id}/+/{sp.edge_node_id}{host}")
+    if "json" in mqtt.formats:
+        lines.append(f"  json       {mqtt.json_topics.prefix}/<machine>/...")
+    lines.append(f"  state_dir  {config.resolved_state_dir}")
+    lines.append(f"  writes     {'enabled' if config.writes.enabled else 'disabled'}"
+                 f" ({len(config.writes.allow)} global allow rule(s))")
+    lines.append(f"  machines   {len(config.machines)}")
+    for machine in config.machines:
+        poll = machine.poll
+        alarms = config.alarms_for(machine)
+        counts = (f"{sum(len(m.numbers) for m in poll.macros)} macros, "
+                  f"{sum(len(p.addresses()) for p in poll.pmc)} PMC values, {len(poll.params)} params, "
+                  f"{len(poll.diags)} diags")
+        lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}  tz {machine.timezone}  "
+                     f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}")
+    return "\n".join(lines)

@@ -1,0 +1,267 @@
+"""`focas-edge read HOST[:PORT] ITEM...`: read items from one CNC in one batched request and print them.
+
+Items use the target grammar of edge.targets (macro:500-505, param:1815/1, pmc:D2204.word, sysinfo ...).
+A readable table by default; `--json` prints one JSON object per item per line: {item, value, error}.
+Exit 0 when every item was read, 1 when any item (or the connection) failed, 2 on bad usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, is_dataclass
+from datetime import datetime
+from typing import Any
+
+from edge import ConfigError
+from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.focas import items as it
+from edge.focas.errors import CncError, FocasError
+from edge.focas.model import ParamRecord
+from edge.targets import (
+    DiagTarget,
+    MacroTarget,
+    NamedTarget,
+    ParamTarget,
+    PmcTarget,
+    Target,
+    TargetError,
+    parse_target,
+)
+
+DEFAULT_TIMEOUT = 5.0
+
+
+# ---- shared by read and write ------------------------------------------------------------------------------
+
+
+def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("address", metavar="HOST[:PORT]",
+                        help="CNC address: host, host:port, tcp:host:port, or unix:/path (packed transport)")
+    parser.add_argument("--transport", choices=("focas", "packed"), default="focas",
+                        help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
+    parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                        help=f"connect and request timeout (default {DEFAULT_TIMEOUT:g})")
+
+
+def open_cnc(args: argparse.Namespace) -> Any:
+    """An unconnected session for the CLI's address/transport/timeout; ConfigError on a bad address."""
+    from edge.focas.connect import open_session
+
+    return open_session(args.transport, args.address, timeout=args.timeout, connect_timeout=args.timeout)
+
+
+def describe_error(exc: BaseException) -> str:
+    """An error as one line that names the EW code where the CNC gave one."""
+    if isinstance(exc, CncError):
+        return f"{exc.name} ({exc.code}): {exc}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def error_object(exc: BaseException) -> dict[str, Any]:
+    error: dict[str, Any] = {"type": type(exc).__name__, "message": str(exc)}
+    if isinstance(exc, CncError):
+        error |= {"code": exc.name, "ew": exc.code}
+    return error
+
+
+def json_value(value: object) -> object:
+    """A decoded value as plain JSON data (dataclasses to objects, datetimes to ISO 8601)."""
+    if isinstance(value, datetime):
+        return value.isoformat()
+    if is_dataclass(value) and not isinstance(value, type):
+        return {k: json_value(v) for k, v in asdict(value).items()}
+    if isinstance(value, dict):
+        return {str(k): json_value(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_value(v) for v in value]
+    if isinstance(value, float) and value != value:
+        return None
+    return value
+
+
+# ---- target -> reads -> value ----------------------------------------------------------------------
+
+Shaper = Callable[[list[Any]], object]
+
+
+@dataclass(frozen=True, slots=True)
+class ReadPlan:
+    """The read items one CLI item needs and how their results become the printed value."""
+
+    text: str
+    items: tuple[it.ReadItem, ...]
+    shape: Shaper
+
+
+def plan_read(text: str) -> ReadPlan:
+    """Raises TargetError for a string that is not a readable target."""
+    target = parse_target(text)
+    items, shape = _reads_for(target)
+    return ReadPlan(text, tuple(items), shape)
+
+
+def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
+    if isinstance(target, NamedTarget):
+        return _NAMED[target.name]
+    if isinstance(target, MacroTarget):
+        return [it.ReadMacros(target.first, target.last)], \
+            lambda r: _by_number(range(target.first, target.last + 1), r[0], "#")
+    if isinstance(target, PmcTarget):
+        item = it.ReadPmc(target.area, target.start, target.end, target.data_type)
+        if target.bit is not None:
+            bit = target.bit
+            return [item], lambda r: (int(r[0][0]) >> bit) & 1
+        addresses = range(target.start, target.end + 1, target.data_type.width)
+        return [item], lambda r: _by_number(addresses, r[0], target.area)
+    if isinstance(target, ParamTarget):
+        read = it.ReadParams(target.first, target.last, target.axis)
+        return [read], lambda r: _records(r[0], target.bit)
+    assert isinstance(target, DiagTarget)
+    return [it.ReadDiag(target.first, target.last, target.axis)], lambda r: _records(r[0], None)
+
+
+def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) -> object:
+    if len(numbers) == 1 and len(values) == 1:
+        return values[0]
+    return {f"{prefix}{n}": v for n, v in zip(numbers, values, strict=False)}
+
+
+def _records(records: Sequence[ParamRecord], bit: int | None) -> object:
+    def one(record: ParamRecord) -> object:
+        value = record.value if len(record.values) == 1 or record.axis != -1 else list(record.values)
+        if bit is not None and isinstance(value, int):
+            return (value >> bit) & 1
+        return value
+
+    if len(records) == 1:
+        return one(records[0])
+    return {str(r.number): one(r) for r in records}
+
+
+def _positions(results: list[Any]) -> object:
+    names, *kinds = results
+    table: dict[str, dict[str, object]] = {}
+    for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
+        for name, value in zip(names, values, strict=False):
+            table.setdefault(str(name), {})[kind] = value
+    return table
+
+
+_NAMED: dict[str, tuple[list[it.ReadItem], Shaper]] = {
+    "sysinfo": ([it.ReadSysInfo()], lambda r: r[0]),
+    "status": ([it.ReadStatus()], lambda r: r[0]),
+    "alarms": ([it.ReadAlarmStatus(), it.ReadActiveAlarms(32)],
+               lambda r: {"status": r[0], "active": r[1]}),
+    "program": ([it.ReadProgramNumber(), it.ReadSequenceNumber()],
+                lambda r: {"running": r[0].running, "main": r[0].main, "sequence": r[1]}),
+    "positions": ([it.ReadAxisNames(), *(it.ReadPositions(kind) for kind in it.POSITION_KINDS)], _positions),
+    "clock": ([it.ReadClock()], lambda r: r[0]),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ItemOutcome:
+    item: str
+    value: object = None
+    error: BaseException | None = None
+
+
+async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
+    """Connect, read every plan's items in ONE batch, shape the results per CLI item."""
+    flat = [item for plan in plans for item in plan.items]
+    try:
+        async with session as cnc:
+            results = await cnc.batch(flat)
+    except FocasError as exc:
+        return [ItemOutcome(plan.text, error=exc) for plan in plans]
+    outcomes = []
+    position = 0
+    for plan in plans:
+        mine = results[position : position + len(plan.items)]
+        position += len(plan.items)
+        failed = next((r for r in mine if isinstance(r, BaseException)), None)
+        if failed is not None:
+            outcomes.append(ItemOutcome(plan.text, error=failed))
+            continue
+        try:
+            outcomes.append(ItemOutcome(plan.text, plan.shape(mine)))
+        except (IndexError, TypeError, ValueError, AttributeError) as exc:
+            outcomes.append(ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}")))
+    return outcomes
+
+
+# ---- output -----------------------------------------------------------------------------------------
+
+
+def print_json(outcomes: Sequence[ItemOutcome]) -> None:
+    for outcome in outcomes:
+        print(json.dumps({"item": outcome.item, "value": json_value(outcome.value),
+                          "error": error_object(outcome.error) if outcome.error else None}))
+
+
+def print_table(outcomes: Sequence[ItemOutcome]) -> None:
+    rows: list[tuple[str, str, str]] = []
+    for outcome in outcomes:
+        if outcome.error is not None:
+            rows.append((outcome.item, "", "ERROR " + describe_error(outcome.error)))
+            continue
+        for index, (key, text) in enumerate(_flatten(json_value(outcome.value))):
+            rows.append((outcome.item if index == 0 else "", key, text))
+    widths = [max((len(r[i]) for r in rows), default=0) for i in range(2)]
+    for item, key, text in rows:
+        print(f"{item:<{widths[0]}}  {key:<{widths[1]}}  {text}".rstrip())
+
+
+def _flatten(value: object, prefix: str = "") -> list[tuple[str, str]]:
+    if isinstance(value, dict) and value:
+        lines: list[tuple[str, str]] = []
+        for key, inner in value.items():
+            lines += _flatten(inner, f"{prefix}.{key}" if prefix else str(key))
+        return lines
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        lines = []
+        for index, inner in enumerate(value):
+            lines += _flatten(inner, f"{prefix}[{index}]")
+        return lines
+    text = "(vacant)" if value is None else json.dumps(value) if isinstance(value, list | str) else str(value)
+    return [(prefix, text)]
+
+
+# ---- the subcommand ---------------------------------------------------------------------------------------
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "read", help="read items from one CNC",
+        description="Read items from one CNC in one batched request. Items: sysinfo status alarms program "
+                    "positions clock macro:500-505 param:6711 param:1815/1 param:1815/0.3 diag:980-981/1 "
+                    "pmc:D2204.word pmc:R100-R103 pmc:R100.3",
+        epilog="Exit codes: 0 every item read, 1 an item or the connection failed, 2 bad usage.")
+    add_connection_arguments(parser)
+    parser.add_argument("items", nargs="+", metavar="ITEM", help="what to read (see above)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per item: item, value, error")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        plans = [plan_read(text) for text in args.items]
+    except TargetError as exc:
+        print(f"focas-edge read: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        session = open_cnc(args)
+    except ConfigError as exc:
+        print(f"focas-edge read: {'; '.join(exc.problems)}", file=sys.stderr)
+        return EXIT_USAGE
+    outcomes = asyncio.run(read_all(session, plans))
+    (print_json if args.json else print_table)(outcomes)
+    failed = [o for o in outcomes if o.error is not None]
+    for outcome in failed:
+        assert outcome.error is not None
+        print(f"focas-edge read: {outcome.item}: {describe_error(outcome.error)}", file=sys.stderr)
+    return EXIT_FAILURE if failed else EXIT_OK

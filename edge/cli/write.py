@@ -1,0 +1,203 @@
+"""`focas-edge write HOST TARGET=VALUE...`: write to one CNC, read each value back, print the outcome.
+
+    focas-edge write 10.0.0.5 macro:500=1.25 pmc:R100=0x41 pmc:R100.3=1 param:6711=0
+    focas-edge write 10.0.0.5 pmc:R100-R103=1,2,3,4 pmc:D2204.word=600
+
+Writes go in the order given and stop at the first failure. Every value is checked before connecting
+(a bad one is exit 2 and nothing is written). Typed PMC values are sent big-endian, the byte order the
+PMC read answers in, so what you write is what `read` shows. This tool bypasses the daemon's write
+policy: it is for commissioning, by someone standing at the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import struct
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+from edge import ConfigError
+from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli.read import (
+    ItemOutcome,
+    add_connection_arguments,
+    describe_error,
+    error_object,
+    json_value,
+    open_cnc,
+    plan_read,
+)
+from edge.focas.errors import FocasError
+from edge.focas.model import PmcType
+from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
+
+_PMC_FORMATS = {PmcType.BYTE: "B", PmcType.WORD: "H", PmcType.LONG: "I", PmcType.FLOAT: "f",
+                PmcType.DOUBLE: "d"}
+_SIGNED_FORMATS = {PmcType.BYTE: "b", PmcType.WORD: "h", PmcType.LONG: "i"}
+
+
+@dataclass(frozen=True, slots=True)
+class Write:
+    """One validated write: the target and the value in the form the session method takes."""
+
+    text: str
+    target: WritableTarget
+    value: float | int | bool | bytes
+
+
+def parse_write(text: str) -> Write:
+    """`TARGET=VALUE` checked completely; TargetError says what is wrong."""
+    target, raw = parse_assignment(text)
+    if isinstance(target, MacroTarget):
+        if target.count != 1:
+            raise TargetError(f"{text!r}: write one macro at a time (macro:N=VALUE)")
+        return Write(text, target, _finite(text, raw))
+    if isinstance(target, PmcTarget):
+        if target.bit is not None:
+            return Write(text, target, _bit(text, raw))
+        return Write(text, target, _pmc_bytes(text, target, raw))
+    if target.last != target.first:
+        raise TargetError(f"{text!r}: write one parameter at a time (param:N[/AXIS]=VALUE)")
+    if target.bit is not None:
+        return Write(text, target, _bit(text, raw))
+    return Write(text, target, _number(text, raw))
+
+
+def _finite(text: str, raw: str) -> float:
+    try:
+        value = float(raw)
+    except ValueError:
+        raise TargetError(f"{text!r}: expected a number, got {raw!r}") from None
+    if not math.isfinite(value):
+        raise TargetError(f"{text!r}: {raw} is not a finite number")
+    return value
+
+
+def _integer(text: str, raw: str) -> int:
+    try:
+        return int(raw, 0)
+    except ValueError:
+        raise TargetError(f"{text!r}: expected an integer (decimal, 0x.. or 0b..), got {raw!r}") from None
+
+
+def _number(text: str, raw: str) -> int | float:
+    try:
+        return int(raw, 0)
+    except ValueError:
+        return _finite(text, raw)
+
+
+def _bit(text: str, raw: str) -> bool:
+    lowered = raw.lower()
+    if lowered in ("1", "true", "on"):
+        return True
+    if lowered in ("0", "false", "off"):
+        return False
+    raise TargetError(f"{text!r}: a bit takes 0 or 1, got {raw!r}")
+
+
+def _pmc_bytes(text: str, target: PmcTarget, raw: str) -> bytes:
+    parts = [p.strip() for p in raw.split(",")]
+    if len(parts) != target.count:
+        raise TargetError(f"{text!r}: {target} holds {target.count} value(s), got {len(parts)}")
+    kind = target.data_type
+    if kind in (PmcType.FLOAT, PmcType.DOUBLE):
+        return struct.pack(f">{len(parts)}{_PMC_FORMATS[kind]}", *(_finite(text, p) for p in parts))
+    packed = b""
+    bits = kind.width * 8
+    for part in parts:
+        value = _integer(text, part)
+        if not -(1 << (bits - 1)) <= value < (1 << bits):
+            raise TargetError(f"{text!r}: {part} does not fit a {kind.name.lower()} ({bits} bits)")
+        fmt = _SIGNED_FORMATS[kind] if value < 0 else _PMC_FORMATS[kind]
+        packed += struct.pack(f">{fmt}", value)
+    return packed
+
+
+async def apply(session: Any, write: Write) -> None:
+    """Send one write through the session's method for its kind."""
+    target, value = write.target, write.value
+    if isinstance(target, MacroTarget):
+        assert isinstance(value, float)
+        await session.write_macro(target.first, value)
+    elif isinstance(target, PmcTarget) and target.bit is not None:
+        await session.write_pmc_bit(target.area, target.start, target.bit, bool(value))
+    elif isinstance(target, PmcTarget):
+        assert isinstance(value, bytes)
+        await session.write_pmc(target.area, target.start, value)
+    elif isinstance(target, ParamTarget) and target.bit is not None:
+        await session.write_param_bit(target.first, target.bit, bool(value), axis=target.axis)
+    else:
+        assert isinstance(target, ParamTarget) and isinstance(value, int | float)
+        await session.write_param(target.first, value, axis=target.axis)
+
+
+async def write_all(session: Any, writes: list[Write]) -> list[ItemOutcome]:
+    """Write in order, reading each target back; stop at the first failure."""
+    outcomes: list[ItemOutcome] = []
+    try:
+        async with session as cnc:
+            for write in writes:
+                try:
+                    await apply(cnc, write)
+                except FocasError as exc:
+                    outcomes.append(ItemOutcome(write.text, error=exc))
+                    break
+                (read_back,) = await read_all_connected(cnc, str(write.target))
+                outcomes.append(ItemOutcome(write.text, read_back.value, read_back.error))
+                if read_back.error is not None:
+                    break
+    except FocasError as exc:
+        failed = writes[len(outcomes)].text if len(outcomes) < len(writes) else "connection"
+        outcomes.append(ItemOutcome(failed, error=exc))
+    return outcomes
+
+
+async def read_all_connected(cnc: Any, text: str) -> list[ItemOutcome]:
+    plan = plan_read(text)
+    results = await cnc.batch(list(plan.items))
+    failed = next((r for r in results if isinstance(r, BaseException)), None)
+    if failed is not None:
+        return [ItemOutcome(text, error=failed)]
+    return [ItemOutcome(text, plan.shape(results))]
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "write", help="write values to one CNC (commissioning tool)",
+        description="Write TARGET=VALUE to one CNC in order, reading each back. Targets: macro:500=1.25 "
+                    "pmc:R100=0x41 pmc:R100-R101=1,2 pmc:R100.3=1 pmc:D2204.word=600 param:6711=0 "
+                    "param:1815/1=3 param:1815/0.3=1.",
+        epilog="Exit codes: 0 every write done, 1 the CNC refused one or the network failed, 2 bad usage.")
+    add_connection_arguments(parser)
+    parser.add_argument("writes", nargs="+", metavar="TARGET=VALUE")
+    parser.add_argument("--json", action="store_true", help="one JSON object per write: item, value, error")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        writes = [parse_write(text) for text in args.writes]
+    except TargetError as exc:
+        print(f"focas-edge write: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        session = open_cnc(args)
+    except ConfigError as exc:
+        print(f"focas-edge write: {'; '.join(exc.problems)}", file=sys.stderr)
+        return EXIT_USAGE
+    outcomes = asyncio.run(write_all(session, writes))
+    for outcome in outcomes:
+        if args.json:
+            print(json.dumps({"item": outcome.item, "value": json_value(outcome.value),
+                              "error": error_object(outcome.error) if outcome.error else None}))
+        elif outcome.error is None:
+            print(f"{outcome.item}  ok, reads back {json.dumps(json_value(outcome.value))}")
+        if outcome.error is not None:
+            print(f"focas-edge write: {outcome.item}: {describe_error(outcome.error)}", file=sys.stderr)
+    ok = len(outcomes) == len(writes) and all(o.error is None for o in outcomes)
+    return EXIT_OK if ok else EXIT_FAILURE

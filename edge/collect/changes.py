@@ -1,0 +1,77 @@
+"""Report by exception: which samples are worth publishing.
+
+A numeric value is reported when it moves more than its absolute deadband away from the value last
+REPORTED (not last seen), so a slow drift is still published once it adds up. Any change of quality
+is a change. NaN equals NaN and None equals None here, so a vacant macro or an unreadable float does
+not flood the broker; a change between a number and NaN/None is always reported. After `reset()`
+(every (re)connect) the next value of every metric is reported, giving subscribers the full state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+
+from edge.samples import Quality, Sample
+
+
+class ChangeDetector:
+    """Per-machine memory of the last reported sample of each metric."""
+
+    def __init__(self, deadbands: Mapping[str, float] | None = None) -> None:
+        self._deadbands: dict[str, float] = dict(deadbands or {})
+        self._reported: dict[str, Sample] = {}
+
+    def set_deadband(self, name: str, deadband: float) -> None:
+        if deadband < 0 or math.isnan(deadband):
+            raise ValueError(f"deadband of {name!r} must be >= 0, got {deadband}")
+        self._deadbands[name] = deadband
+
+    def reset(self) -> None:
+        """Forget what was reported: the next sample of every metric is reported (full state)."""
+        self._reported.clear()
+
+    def forget(self, name: str) -> None:
+        self._reported.pop(name, None)
+
+    def filter(self, samples: Iterable[Sample]) -> list[Sample]:
+        """The samples to publish, in order; they become the new reference values."""
+        return [sample for sample in samples if self.offer(sample)]
+
+    def offer(self, sample: Sample) -> bool:
+        """True (and remember it) if `sample` differs enough from the last reported one."""
+        previous = self._reported.get(sample.name)
+        if previous is not None and not self._differs(previous, sample):
+            return False
+        self._reported[sample.name] = sample
+        return True
+
+    def last_reported(self) -> dict[str, Sample]:
+        """The current picture as subscribers know it (for births after a rebirth request)."""
+        return dict(self._reported)
+
+    def _differs(self, previous: Sample, sample: Sample) -> bool:
+        if previous.quality != sample.quality or previous.type != sample.type:
+            return True
+        return values_differ(previous.value, sample.value, self._deadbands.get(sample.name, 0.0))
+
+
+def values_differ(old: object, new: object, deadband: float = 0.0) -> bool:
+    """Whether `new` is a reportable change from `old` under an absolute deadband."""
+    if _is_number(old) and _is_number(new):
+        a, b = float(old), float(new)  # type: ignore[arg-type]
+        if math.isnan(a) or math.isnan(b):
+            return math.isnan(a) != math.isnan(b)
+        if deadband > 0:
+            return abs(b - a) > deadband
+        return old != new
+    if type(old) is not type(new):
+        return True
+    return bool(old != new)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+__all__ = ["ChangeDetector", "Quality", "values_differ"]

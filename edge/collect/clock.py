@@ -1,0 +1,169 @@
+"""CNC clock tracking: source timestamps from the CNC's own clock, finer than its one-second resolution.
+
+Every poll batch also reads the CNC clock (local wall time, whole seconds). For each reading we know
+the gateway's monotonic time at the midpoint of the request, `m`, and the CNC's truncated time
+converted to UTC with the machine's time zone, `c`. If the CNC clock runs at `m + θ` (θ the unknown
+CNC-vs-gateway offset), truncation means
+
+        c  <=  m + θ  <  c + 1        so        θ ∈ [c - m, c - m + 1)
+
+(each bound widened by half the request's round trip, since the CNC read its clock somewhere inside
+the request, not exactly at its midpoint).
+
+Each tick narrows the interval: θ ≥ max(c_i - m_i) and θ < min(c_i - m_i + 1) over a window of recent
+ticks. Ticks land at different phases of the CNC second (polling is jittered and not a divisor of
+1 s), so the ticks just before and just after each "second flip" pin θ down to roughly the tick
+spacing plus the request's round-trip uncertainty; the estimate is the middle of the interval. If the
+interval becomes empty (the CNC clock was set, a DST or time-zone jump, or drift over a long window),
+the window restarts from the newest reading. Using the gateway's monotonic clock keeps the estimate
+immune to NTP steps on the gateway itself.
+
+The CNC time of any gateway moment is then `m_now + θ`. The skew — CNC minus gateway wall time — is
+published as a metric. Beyond `max_skew_s` (dead clock battery, wrong time zone) the tracker says to
+use gateway time instead, with the reason, and goes back to CNC time as soon as the skew is within
+the limit again.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import deque
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from zoneinfo import ZoneInfo
+
+DEFAULT_WINDOW_S = 300.0
+MAX_READINGS = 512
+
+
+def cnc_to_utc_seconds(cnc_wall: datetime, zone: ZoneInfo) -> float:
+    """A naive CNC wall-clock time in `zone` as epoch seconds (UTC); aware values are taken as they are."""
+    aware = cnc_wall if cnc_wall.tzinfo is not None else cnc_wall.replace(tzinfo=zone)
+    return aware.timestamp()
+
+
+def utc_ms_to_datetime(ms: int) -> datetime:
+    return datetime(1970, 1, 1, tzinfo=UTC) + timedelta(milliseconds=ms)
+
+
+class ClockTransition(enum.Enum):
+    """What changed with the latest reading, for a single log line."""
+
+    TO_GATEWAY = "to_gateway"
+    TO_CNC = "to_cnc"
+
+
+@dataclass(frozen=True, slots=True)
+class _Reading:
+    lower: float  # c - m - u: the offset is at least this
+    upper: float  # c - m + 1 + u: and less than this
+    monotonic: float
+
+
+class ClockTracker:
+    """Offset estimate between one CNC's clock and the gateway's; see the module docstring."""
+
+    def __init__(self, zone: ZoneInfo | str, max_skew_s: float, window_s: float = DEFAULT_WINDOW_S) -> None:
+        self.zone = zone if isinstance(zone, ZoneInfo) else ZoneInfo(zone)
+        self.max_skew_s = max_skew_s
+        self.window_s = window_s
+        self._readings: deque[_Reading] = deque(maxlen=MAX_READINGS)
+        self._low = float("-inf")
+        self._high = float("inf")
+        self._skew: float | None = None
+        self._use_gateway = True
+        self._reason: str | None = "no CNC clock reading yet"
+        self.restarts = 0
+
+    # ---- input -------------------------------------------------------------------------------------
+    def observe(self, cnc_wall: datetime, gateway_monotonic: float, gateway_wall: float,
+                half_rtt_s: float = 0.0) -> ClockTransition | None:
+        """Add one CNC clock reading taken at the request midpoint (gateway monotonic and wall seconds).
+
+        `half_rtt_s` (half the request's round trip) widens the reading's interval: the CNC sampled its
+        clock somewhere inside the request, not necessarily at its midpoint.
+        """
+        base = cnc_to_utc_seconds(cnc_wall, self.zone) - gateway_monotonic
+        margin = max(half_rtt_s, 0.0)
+        self._readings.append(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic))
+        while self._readings and gateway_monotonic - self._readings[0].monotonic > self.window_s:
+            self._readings.popleft()
+        self._recompute()
+        if self._low >= self._high:
+            # Inconsistent with the window: the CNC clock jumped (or drifted). Keep the newest
+            # readings that still agree with each other and drop the older ones.
+            self.restarts += 1
+            newest = list(self._readings)
+            self._readings.clear()
+            low, high = float("-inf"), float("inf")
+            for reading in reversed(newest):
+                low, high = max(low, reading.lower), min(high, reading.upper)
+                if low >= high:
+                    break
+                self._readings.appendleft(reading)
+            self._recompute()
+        offset = self.offset_s
+        assert offset is not None
+        self._skew = gateway_monotonic + offset - gateway_wall
+        return self._judge()
+
+    def _recompute(self) -> None:
+        self._low = max(r.lower for r in self._readings)
+        self._high = min(r.upper for r in self._readings)
+
+    def _judge(self) -> ClockTransition | None:
+        assert self._skew is not None
+        was_gateway = self._use_gateway
+        if abs(self._skew) > self.max_skew_s:
+            direction = "ahead of" if self._skew > 0 else "behind"
+            self._use_gateway = True
+            self._reason = (f"CNC clock {abs(self._skew):.1f}s {direction} the gateway, beyond "
+                            f"max_skew_s {self.max_skew_s:g}")
+        else:
+            self._use_gateway = False
+            self._reason = None
+        if self._use_gateway == was_gateway:
+            return None
+        return ClockTransition.TO_GATEWAY if self._use_gateway else ClockTransition.TO_CNC
+
+    # ---- output ------------------------------------------------------------------------------------
+    @property
+    def offset_s(self) -> float | None:
+        """CNC UTC time minus gateway monotonic time (middle of the feasible interval)."""
+        if not self._readings:
+            return None
+        return (self._low + self._high) / 2
+
+    @property
+    def uncertainty_s(self) -> float | None:
+        """Half-width of the feasible interval: how far the estimate can be off."""
+        return (self._high - self._low) / 2 if self._readings else None
+
+    @property
+    def skew_s(self) -> float | None:
+        """CNC minus gateway wall time at the last reading, seconds (positive: CNC ahead)."""
+        return self._skew
+
+    @property
+    def use_gateway_time(self) -> bool:
+        return self._use_gateway
+
+    @property
+    def reason(self) -> str | None:
+        """Why gateway time is used (None while CNC time is used)."""
+        return self._reason
+
+    def source_time_ms(self, gateway_monotonic: float, gateway_wall: float) -> int:
+        """The timestamp for a sample taken now: CNC time in UTC ms, or gateway time when told to."""
+        offset = self.offset_s
+        if self._use_gateway or offset is None:
+            return round(gateway_wall * 1000)
+        return round((gateway_monotonic + offset) * 1000)
+
+    def reset(self) -> None:
+        """Forget every reading (a different CNC behind the same address, or a clock set on purpose)."""
+        self._readings.clear()
+        self._low, self._high = float("-inf"), float("inf")
+        self._skew = None
+        self._use_gateway = True
+        self._reason = "no CNC clock reading yet"

@@ -1,0 +1,341 @@
+"""A machine's poll plan: which reads belong to which group, when each group is due, and the metrics.
+
+Declarative on purpose: the tables below say which read item feeds which metric (name, type, unit)
+and how its value is picked out; the poller only asks `due(now)`, batches `reads_for(groups)` into one
+request, and turns each result into values with `metric_values`.
+
+Metric names use Sparkplug folders: `Status/Run`, `Program/Number`, `Spindle/1/Speed`,
+`Axis/X/Absolute`, `Macro/500`, `PMC/D2204`, `Alarm/Active`, `Counters/Parts`, `Clock/Skew` ...
+Axis and spindle names are only known after the static reads, so the full plan is built per session
+with `MachinePlan.build(machine, alarms, static)`.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+from edge.config import AlarmsConfig, MachineConfig
+from edge.focas import items as it
+from edge.focas.model import ActiveAlarm, ParamRecord, PmcType, StatInfo, SysInfo
+from edge.samples import MetricSpec, MetricType
+
+PART_COUNT_PARAM = 6711
+
+
+class Group(enum.Enum):
+    """Poll groups; each has its own period (static: once per connection)."""
+
+    STATIC = "static"
+    STATUS = "status"
+    ACTIVE_ALARMS = "active_alarms"  # read with the status tick, only when the alarm status changed
+    MACROS = "macros"
+    PMC = "pmc"
+    PARAMS = "params"
+    DIAGS = "diags"
+    ALARM_HISTORY = "alarm_history"
+
+
+# ---- value tables ------------------------------------------------------------------------------------------
+
+# cnc_statinfo codes (16/18/21/0i/30i) as the short texts FANUC screens show.
+MODE_NAMES = {0: "MDI", 1: "MEM", 2: "****", 3: "EDIT", 4: "HND", 5: "JOG", 6: "TJOG", 7: "THND",
+              8: "INC", 9: "REF", 10: "RMT"}
+RUN_NAMES = {0: "RESET", 1: "STOP", 2: "HOLD", 3: "START", 4: "MSTR"}
+MOTION_NAMES = {0: "", 1: "MTN", 2: "DWL"}
+EMERGENCY_NAMES = {0: "", 1: "EMG", 2: "RESET"}
+ALARM_NAMES = {0: "", 1: "ALM", 2: "BAT", 3: "FAN", 4: "PS", 5: "FSSB", 6: "INSULATE", 7: "ENCODER", 8: "PMC"}
+POSITION_FOLDERS = {"absolute": "Absolute", "machine": "Machine", "relative": "Relative",
+                    "distance": "DistanceToGo"}
+PMC_METRIC_TYPES = {PmcType.BYTE: MetricType.UINT8, PmcType.WORD: MetricType.INT16,
+                    PmcType.LONG: MetricType.INT32, PmcType.FLOAT: MetricType.FLOAT,
+                    PmcType.DOUBLE: MetricType.DOUBLE}
+ROTARY_AXES = frozenset("ABC")
+
+
+def _name(table: dict[int, str], code: int) -> str:
+    return table.get(code, str(code))
+
+
+STATUS_METRICS: tuple[tuple[MetricSpec, Callable[[StatInfo], object]], ...] = (
+    (MetricSpec("Status/Mode", MetricType.STRING, description="automatic/manual mode"),
+     lambda s: _name(MODE_NAMES, s.aut)),
+    (MetricSpec("Status/Run", MetricType.STRING, description="run state"), lambda s: _name(RUN_NAMES, s.run)),
+    (MetricSpec("Status/Motion", MetricType.STRING), lambda s: _name(MOTION_NAMES, s.motion)),
+    (MetricSpec("Status/Emergency", MetricType.BOOLEAN), lambda s: s.emergency == 1),
+    (MetricSpec("Status/Alarm", MetricType.STRING), lambda s: _name(ALARM_NAMES, s.alarm)),
+    (MetricSpec("Status/Edit", MetricType.INT16), lambda s: s.edit),
+    (MetricSpec("Status/MSTB", MetricType.BOOLEAN, description="M/S/T/B function finishing"),
+     lambda s: s.mstb == 1),
+)
+
+SYSINFO_METRICS: tuple[tuple[MetricSpec, Callable[[SysInfo], object]], ...] = (
+    (MetricSpec("Device/Model", MetricType.STRING), lambda s: s.model_name),
+    (MetricSpec("Device/Series", MetricType.STRING), lambda s: s.series),
+    (MetricSpec("Device/Version", MetricType.STRING), lambda s: s.version),
+    (MetricSpec("Device/MaxAxis", MetricType.INT16), lambda s: s.max_axis),
+)
+
+CLOCK_SKEW = MetricSpec("Clock/Skew", MetricType.DOUBLE, "s", description="CNC minus gateway time")
+CLOCK_GATEWAY = MetricSpec("Clock/UsingGatewayTime", MetricType.BOOLEAN,
+                           description="true while the CNC clock is beyond max_skew_s")
+ALARM_ACTIVE = MetricSpec("Alarm/Active", MetricType.STRING, description="JSON list of active alarms")
+ALARM_COUNT = MetricSpec("Alarm/Count", MetricType.INT32)
+ALARM_EVENT = MetricSpec("Alarm/Event", MetricType.STRING, description="JSON raise/clear event")
+ALARM_HISTORY = MetricSpec("Alarm/History", MetricType.STRING, description="JSON alarm history entry")
+ALARM_STATUS = MetricSpec("Alarm/Status", MetricType.UINT32, description="alarm status bits")
+PART_COUNT = MetricSpec("Counters/Parts", MetricType.INT64, description="parameter 6711")
+AXIS_NAMES = MetricSpec("Device/AxisNames", MetricType.STRING)
+SPINDLE_NAMES = MetricSpec("Device/SpindleNames", MetricType.STRING)
+
+# Metrics the collector fills itself (not from one read item).
+CLOCK_METRICS = (CLOCK_SKEW, CLOCK_GATEWAY)
+EVENT_METRICS = (ALARM_EVENT,)
+
+
+# ---- the plan ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class StaticInfo:
+    """What the static reads told us about this control, needed to name axis and spindle metrics."""
+
+    sysinfo: SysInfo | None = None
+    axis_names: tuple[str, ...] = ()
+    spindle_names: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class PlannedRead:
+    """One read item, its group, and the metrics its result feeds (in the order metric_values returns)."""
+
+    group: Group
+    item: it.ReadItem
+    metrics: tuple[MetricSpec, ...]
+    deadbands: tuple[float, ...] = ()
+
+    def deadband_map(self) -> dict[str, float]:
+        return {m.name: d for m, d in zip(self.metrics, self.deadbands, strict=False) if d}
+
+
+@dataclass(frozen=True, slots=True)
+class MachinePlan:
+    """Every read of one machine grouped, with the periods (seconds) of the groups."""
+
+    reads: tuple[PlannedRead, ...]
+    periods: dict[Group, float] = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, machine: MachineConfig, alarms: AlarmsConfig,
+              static: StaticInfo | None = None) -> MachinePlan:
+        static = static or StaticInfo()
+        poll = machine.poll
+        reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
+        reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
+        reads += _macro_reads(machine)
+        reads += _pmc_reads(machine)
+        reads += _numbered_reads(machine)
+        if alarms.mode == "ActivePlusHistory":
+            reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(alarms.history_depth),
+                                     (ALARM_HISTORY,)))
+        periods = {Group.STATUS: poll.periods.status, Group.ACTIVE_ALARMS: poll.periods.status,
+                   Group.MACROS: poll.periods.macros, Group.PMC: poll.periods.pmc,
+                   Group.PARAMS: poll.periods.params, Group.DIAGS: poll.periods.diags,
+                   Group.ALARM_HISTORY: alarms.history_interval}
+        return cls(tuple(reads), periods)
+
+    def reads_for(self, groups: Iterable[Group]) -> list[PlannedRead]:
+        """The reads of `groups`, in plan order (the poller adds ReadClock to every batch)."""
+        wanted = set(groups)
+        return [read for read in self.reads if read.group in wanted]
+
+    def without(self, operation: str) -> MachinePlan:
+        """The plan minus every read of one operation (a function this control answers EW_FUNC to)."""
+        return MachinePlan(tuple(r for r in self.reads if r.item.operation != operation), self.periods)
+
+    def metrics(self) -> list[MetricSpec]:
+        """Every metric this machine can publish (for its DBIRTH), names unique."""
+        seen: dict[str, MetricSpec] = {}
+        for read in self.reads:
+            if read.group is not Group.STATIC or read.item.operation == "ReadSysInfo":
+                for spec in read.metrics:
+                    seen.setdefault(spec.name, spec)
+        for spec in (*CLOCK_METRICS, *EVENT_METRICS):
+            seen.setdefault(spec.name, spec)
+        return list(seen.values())
+
+    def deadbands(self) -> dict[str, float]:
+        bands: dict[str, float] = {}
+        for read in self.reads:
+            bands.update(read.deadband_map())
+        return bands
+
+
+def _static_reads() -> list[PlannedRead]:
+    return [
+        PlannedRead(Group.STATIC, it.ReadSysInfo(), tuple(spec for spec, _ in SYSINFO_METRICS)),
+        PlannedRead(Group.STATIC, it.ReadAxisNames(), (AXIS_NAMES,)),
+        PlannedRead(Group.STATIC, it.ReadSpindleNames(), (SPINDLE_NAMES,)),
+    ]
+
+
+def _status_reads(positions: Sequence[str], part_count: bool, static: StaticInfo) -> list[PlannedRead]:
+    spindles = range(1, len(static.spindle_names or ("1",)) + 1)
+    status = Group.STATUS
+    reads = [
+        PlannedRead(status, it.ReadStatus(), tuple(spec for spec, _ in STATUS_METRICS)),
+        PlannedRead(status, it.ReadAlarmStatus(), (ALARM_STATUS,)),
+        PlannedRead(status, it.ReadProgramNumber(), (MetricSpec("Program/Number", MetricType.INT32),
+                                                     MetricSpec("Program/Main", MetricType.INT32))),
+        PlannedRead(status, it.ReadSequenceNumber(), (MetricSpec("Program/Sequence", MetricType.INT32),)),
+        PlannedRead(status, it.ReadFeed(), (MetricSpec("Feed/Actual", MetricType.DOUBLE, "mm/min"),)),
+        PlannedRead(status, it.ReadSpindleSpeed(),
+                    (MetricSpec("Spindle/1/Speed", MetricType.DOUBLE, "rpm"),)),
+        PlannedRead(status, it.ReadSpindleLoad(),
+                    tuple(MetricSpec(f"Spindle/{i}/Load", MetricType.DOUBLE, "%") for i in spindles)),
+    ]
+    for kind in positions:
+        specs = tuple(MetricSpec(f"Axis/{axis}/{POSITION_FOLDERS[kind]}", MetricType.DOUBLE, axis_unit(axis))
+                      for axis in static.axis_names)
+        reads.append(PlannedRead(Group.STATUS, it.ReadPositions(kind), specs))
+    if part_count:
+        part_count_read = it.ReadParams(PART_COUNT_PARAM, PART_COUNT_PARAM)
+        reads.append(PlannedRead(Group.STATUS, part_count_read, (PART_COUNT,)))
+    return reads
+
+
+def axis_unit(axis_name: str) -> str:
+    """Engineering unit of an axis position: degrees for rotary A/B/C, millimetres otherwise."""
+    return "deg" if axis_name[:1].upper() in ROTARY_AXES else "mm"
+
+
+def _macro_reads(machine: MachineConfig) -> list[PlannedRead]:
+    reads = []
+    for macro in machine.poll.macros:
+        numbers = macro.numbers
+        specs = tuple(MetricSpec(macro.metric_name(n), MetricType.DOUBLE, writable=True) for n in numbers)
+        reads.append(PlannedRead(Group.MACROS, it.ReadMacros(numbers.start, numbers.stop - 1), specs,
+                                 (macro.deadband,) * len(specs)))
+    return reads
+
+
+def _pmc_reads(machine: MachineConfig) -> list[PlannedRead]:
+    reads = []
+    for pmc in machine.poll.pmc:
+        target = pmc.target
+        specs = tuple(MetricSpec(pmc.metric_name(a), PMC_METRIC_TYPES[target.data_type], writable=True)
+                      for a in pmc.addresses())
+        item = it.ReadPmc(target.area, target.start, target.end, target.data_type)
+        reads.append(PlannedRead(Group.PMC, item, specs, (pmc.deadband,) * len(specs)))
+    return reads
+
+
+def _numbered_reads(machine: MachineConfig) -> list[PlannedRead]:
+    reads = []
+    for param in machine.poll.params:
+        spec = MetricSpec(param.metric_name("Param"), MetricType.DOUBLE, writable=True)
+        reads.append(PlannedRead(Group.PARAMS, it.ReadParams(param.number, param.number, param.axis), (spec,),
+                                 (param.deadband,)))
+    for diag in machine.poll.diags:
+        spec = MetricSpec(diag.metric_name("Diag"), MetricType.DOUBLE)
+        reads.append(PlannedRead(Group.DIAGS, it.ReadDiag(diag.number, diag.number, diag.axis), (spec,),
+                                 (diag.deadband,)))
+    return reads
+
+
+# ---- results to values -----------------------------------------------------------------------------
+
+
+def metric_values(read: PlannedRead, result: object) -> list[tuple[MetricSpec, object]]:
+    """The (metric, value) pairs one successful read result gives, for the metrics the read declares."""
+    values = _extract(read.item, result)
+    return [(spec, _coerce(spec, value)) for spec, value in zip(read.metrics, values, strict=False)]
+
+
+def _extract(item: it.ReadItem, result: object) -> list[object]:
+    match item:
+        case it.ReadStatus():
+            assert isinstance(result, StatInfo)
+            return [pick(result) for _, pick in STATUS_METRICS]
+        case it.ReadSysInfo():
+            assert isinstance(result, SysInfo)
+            return [pick(result) for _, pick in SYSINFO_METRICS]
+        case it.ReadProgramNumber():
+            return [result.running, result.main]  # type: ignore[attr-defined]
+        case it.ReadActiveAlarms():
+            alarms = list(result)  # type: ignore[call-overload]
+            return [active_alarms_json(alarms), len(alarms)]
+        case it.ReadAxisNames() | it.ReadSpindleNames():
+            return [",".join(str(name) for name in result)]  # type: ignore[attr-defined]
+        case it.ReadParams() | it.ReadDiag():
+            records: list[ParamRecord] = list(result)  # type: ignore[call-overload]
+            return [r.value for r in records]
+        case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions():
+            return list(result)  # type: ignore[call-overload]
+        case it.ReadAlarmHistory():
+            return []  # published per entry as events, see edge.collect.alarms
+        case _:
+            return [result]
+
+
+def active_alarms_json(alarms: Sequence[ActiveAlarm]) -> str:
+    return json.dumps([{"type": a.type, "number": a.number, "axis": a.axis, "message": a.message}
+                       for a in alarms], separators=(",", ":"))
+
+
+_INT_TYPES = {MetricType.INT8, MetricType.INT16, MetricType.INT32, MetricType.INT64, MetricType.UINT8,
+              MetricType.UINT16, MetricType.UINT32, MetricType.UINT64}
+
+
+def _coerce(spec: MetricSpec, value: object) -> object:
+    """Match the declared type (a REAL parameter published as Double, a count as an int)."""
+    if value is None:
+        return None
+    if spec.type in (MetricType.DOUBLE, MetricType.FLOAT) and isinstance(value, int | float):
+        return float(value)
+    if spec.type in _INT_TYPES and isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+# ---- when groups are due ---------------------------------------------------------------------------
+
+
+class Schedule:
+    """Per-group due times for one session. Static is due once per connection; a group that fell
+    behind is not caught up tick by tick: its next time moves past `now`, and the skipped periods
+    are counted."""
+
+    def __init__(self, periods: dict[Group, float]) -> None:
+        self.periods = dict(periods)
+        self._next: dict[Group, float] = {}
+        self._static_pending = True
+        self.skipped = 0
+
+    def start(self, now: float) -> None:
+        """A new connection: static data and every group are due at once."""
+        self._next = dict.fromkeys(self.periods, now)
+        self._static_pending = True
+
+    def due(self, now: float) -> set[Group]:
+        """The groups due at `now`; advances their next time."""
+        groups = {Group.STATIC} if self._static_pending else set()
+        self._static_pending = False
+        for group, when in self._next.items():
+            if when > now:
+                continue
+            groups.add(group)
+            period = self.periods[group]
+            following = when + period
+            if following <= now:
+                missed = int((now - following) // period) + 1
+                self.skipped += missed
+                following += missed * period
+            self._next[group] = following
+        return groups
+
+    def next_due(self) -> float | None:
+        """The earliest time any group is due (None before start())."""
+        return min(self._next.values()) if self._next else None

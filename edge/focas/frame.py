@@ -1,0 +1,282 @@
+"""FOCAS/Ethernet framing, sans-IO: bytes in, frames and subpackets out (and back).
+
+Every PDU starts with a 10-byte header::
+
+    A0 A0 A0 A0 | version u16 | type u16 | length u16 (bytes after this field)
+
+Data PDUs (0x2101 request, 0x2102 response) carry ``u16 count`` and then ``count`` subpackets. A request
+subpacket is ``u16 len (0x1C + extra) | u16 class | u16 path | u16 command | 5 x i32 args | extra``; a
+response subpacket is ``u16 len | class, path, command echo | i16 rc | i16 detail | 00 00 | u16 n | n
+payload bytes`` (16 bytes when an error carries no payload). Everything is big-endian.
+
+Both directions are encoded and decoded here, so the client and the simulated CNC share one
+implementation. Malformed input raises :class:`ProtocolError` (and nothing else) with a message naming
+what was expected and what arrived. See docs/protocol.md for sources and evidence.
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from edge.focas.errors import ProtocolError
+
+SYNC = b"\xa0\xa0\xa0\xa0"
+HEADER_SIZE = 10
+REQUEST_VERSION = 1
+# Real controls answer 2 (16i/160i), 3 (31i-B) or 4 (31i); 1 is what clients send and LMX accepts back.
+ACCEPTED_VERSIONS = frozenset({1, 2, 3, 4})
+DEFAULT_RESPONSE_VERSION = 2
+# The length field is u16, so no frame body can be longer; a decoder may be configured tighter.
+MAX_BODY_LENGTH = 0xFFFF
+
+REQUEST_SUBPACKET_FIXED = 0x1C
+RESPONSE_SUBPACKET_FIXED = 16
+CLASS_CNC = 1
+CLASS_PMC = 2
+
+_HEADER = struct.Struct(">4sHHH")
+_REQUEST_SUB = struct.Struct(">HHHHiiiii")
+_RESPONSE_SUB = struct.Struct(">HHHHhh2sH")
+_U16 = struct.Struct(">H")
+
+
+class PduType(enum.IntEnum):
+    """Header type word: high byte = kind, low byte = direction (01 to the CNC, 02 back)."""
+
+    OPEN_REQUEST = 0x0101
+    OPEN_RESPONSE = 0x0102
+    CLOSE_REQUEST = 0x0201
+    CLOSE_RESPONSE = 0x0202
+    DATA_REQUEST = 0x2101
+    DATA_RESPONSE = 0x2102
+
+
+class OpenStream(enum.IntEnum):
+    """Payload of the open PDU: which kind of session this TCP connection carries."""
+
+    PROGRAM_TRANSFER = 1
+    DATA = 2
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One PDU: header fields plus the body (the bytes counted by the length field)."""
+
+    version: int
+    type: int
+    body: bytes
+
+    def encode(self) -> bytes:
+        if len(self.body) > MAX_BODY_LENGTH:
+            raise ValueError(f"frame body of {len(self.body)} bytes exceeds the u16 length field")
+        return _HEADER.pack(SYNC, self.version, self.type, len(self.body)) + self.body
+
+
+@dataclass(frozen=True, slots=True)
+class RequestSubpacket:
+    """One function call inside a data request: class (1 CNC, 2 PMC), command, five args, extra bytes."""
+
+    cls: int
+    command: int
+    args: tuple[int, int, int, int, int] = (0, 0, 0, 0, 0)
+    extra: bytes = b""
+    path: int = 1
+
+    def encode(self) -> bytes:
+        length = REQUEST_SUBPACKET_FIXED + len(self.extra)
+        if length > 0xFFFF:
+            raise ValueError(f"subpacket extra of {len(self.extra)} bytes does not fit a u16 length")
+        try:
+            head = _REQUEST_SUB.pack(length, self.cls, self.path, self.command, *self.args)
+        except struct.error as exc:
+            raise ValueError(f"subpacket field out of range in {self!r}: {exc}") from exc
+        return head + self.extra
+
+
+@dataclass(frozen=True, slots=True)
+class ResponseSubpacket:
+    """One answer inside a data response: the echo, return code (EW_*), detail and payload."""
+
+    cls: int
+    command: int
+    rc: int = 0
+    detail: int = 0
+    payload: bytes = b""
+    path: int = 1
+
+    def encode(self) -> bytes:
+        length = RESPONSE_SUBPACKET_FIXED + len(self.payload)
+        if length > 0xFFFF:
+            raise ValueError(f"subpacket payload of {len(self.payload)} bytes does not fit a u16 length")
+        return _RESPONSE_SUB.pack(length, self.cls, self.path, self.command, self.rc, self.detail,
+                                  b"\x00\x00", len(self.payload)) + self.payload
+
+    def answers(self, request: RequestSubpacket) -> bool:
+        """Whether this subpacket echoes the request's class, path and command."""
+        return (self.cls, self.path, self.command) == (request.cls, request.path, request.command)
+
+
+def request_subpacket(cls: int, command: int, a1: int = 0, a2: int = 0, a3: int = 0, a4: int = 0,
+                      a5: int | None = None, extra: bytes = b"", path: int = 1) -> RequestSubpacket:
+    """A request subpacket; arg5 defaults to len(extra), as every published write does."""
+    return RequestSubpacket(cls, command, (a1, a2, a3, a4, len(extra) if a5 is None else a5), extra, path)
+
+
+# ---- bodies ---------------------------------------------------------------------------------------------
+
+
+def encode_request_body(subpackets: Sequence[RequestSubpacket]) -> bytes:
+    return _U16.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
+
+
+def encode_response_body(subpackets: Sequence[ResponseSubpacket]) -> bytes:
+    return _U16.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
+
+
+def _split_subpackets(body: bytes, minimum: int, what: str) -> list[bytes]:
+    """Cut a data body into subpacket byte strings (each including its own length word)."""
+    if len(body) < 2:
+        raise ProtocolError(f"{what}: expected a 2-byte subpacket count, got a {len(body)}-byte body")
+    (count,) = _U16.unpack_from(body, 0)
+    chunks: list[bytes] = []
+    offset = 2
+    for index in range(count):
+        if offset + 2 > len(body):
+            raise ProtocolError(f"{what}: count says {count} subpackets but the body ends after {index} "
+                                f"(at byte {offset} of {len(body)})")
+        (length,) = _U16.unpack_from(body, offset)
+        if length < minimum:
+            raise ProtocolError(f"{what}: subpacket {index} length {length} is below the minimum {minimum}")
+        if offset + length > len(body):
+            raise ProtocolError(f"{what}: subpacket {index} declares {length} bytes at offset {offset} but "
+                                f"only {len(body) - offset} remain")
+        chunks.append(body[offset : offset + length])
+        offset += length
+    if offset != len(body):
+        raise ProtocolError(f"{what}: {len(body) - offset} bytes left after the {count} subpackets the "
+                            f"count announced")
+    return chunks
+
+
+def decode_request_body(body: bytes) -> list[RequestSubpacket]:
+    """The subpackets of a 0x2101 body."""
+    result = []
+    for chunk in _split_subpackets(body, REQUEST_SUBPACKET_FIXED, "data request"):
+        _, cls, path, command, *args = _REQUEST_SUB.unpack_from(chunk, 0)
+        a1, a2, a3, a4, a5 = args
+        result.append(RequestSubpacket(cls, command, (a1, a2, a3, a4, a5),
+                                       bytes(chunk[REQUEST_SUBPACKET_FIXED:]), path))
+    return result
+
+
+def decode_response_body(body: bytes) -> list[ResponseSubpacket]:
+    """The subpackets of a 0x2102 body; each payload length must match its subpacket length."""
+    result = []
+    for index, chunk in enumerate(_split_subpackets(body, RESPONSE_SUBPACKET_FIXED, "data response")):
+        length, cls, path, command, rc, detail, _pad, size = _RESPONSE_SUB.unpack_from(chunk, 0)
+        if size != length - RESPONSE_SUBPACKET_FIXED:
+            raise ProtocolError(f"data response: subpacket {index} (command 0x{command:04x}) announces a "
+                                f"{size}-byte payload but its length {length} leaves room for "
+                                f"{length - RESPONSE_SUBPACKET_FIXED}")
+        payload = bytes(chunk[RESPONSE_SUBPACKET_FIXED:])
+        result.append(ResponseSubpacket(cls, command, rc, detail, payload, path))
+    return result
+
+
+# ---- whole PDUs -----------------------------------------------------------------------------------------
+
+
+def encode_request(subpackets: Sequence[RequestSubpacket]) -> bytes:
+    """A complete 0x2101 data request PDU."""
+    return Frame(REQUEST_VERSION, PduType.DATA_REQUEST, encode_request_body(subpackets)).encode()
+
+
+def encode_response(subpackets: Sequence[ResponseSubpacket],
+                    version: int = DEFAULT_RESPONSE_VERSION) -> bytes:
+    """A complete 0x2102 data response PDU (what the simulated CNC sends)."""
+    return Frame(version, PduType.DATA_RESPONSE, encode_response_body(subpackets)).encode()
+
+
+def encode_open_request(stream: OpenStream = OpenStream.DATA) -> bytes:
+    return Frame(REQUEST_VERSION, PduType.OPEN_REQUEST, _U16.pack(stream)).encode()
+
+
+def encode_open_response(payload: bytes = b"", version: int = DEFAULT_RESPONSE_VERSION) -> bytes:
+    """Clients check only the type; the 360-byte payload a 31i sends is undocumented."""
+    return Frame(version, PduType.OPEN_RESPONSE, payload).encode()
+
+
+def encode_close_request() -> bytes:
+    return Frame(REQUEST_VERSION, PduType.CLOSE_REQUEST, b"").encode()
+
+
+def encode_close_response(version: int = DEFAULT_RESPONSE_VERSION) -> bytes:
+    return Frame(version, PduType.CLOSE_RESPONSE, b"").encode()
+
+
+def decode_frame(data: bytes, versions: Iterable[int] = ACCEPTED_VERSIONS) -> Frame:
+    """Exactly one frame, no more and no less."""
+    decoder = FrameDecoder(versions=versions)
+    frames = decoder.feed(data)
+    if len(frames) != 1 or decoder.buffered:
+        raise ProtocolError(f"expected exactly one frame in {len(data)} bytes, got {len(frames)} frame(s) "
+                            f"and {decoder.buffered} bytes left over")
+    return frames[0]
+
+
+class FrameDecoder:
+    """Incremental frame decoder: feed it whatever a read returned, get every frame it completed.
+
+    A frame may arrive split over many reads, and one read may hold several frames. The sync word is
+    checked byte by byte as it arrives, so garbage fails at once instead of waiting for a header; the
+    length is bounded by `max_body`, so a peer can never make it buffer without limit. After an error
+    the decoder stays failed (the stream position is lost): the session must be reset.
+    """
+
+    def __init__(self, versions: Iterable[int] = ACCEPTED_VERSIONS, max_body: int = MAX_BODY_LENGTH) -> None:
+        self._versions = frozenset(versions)
+        self._max_body = max_body
+        self._buffer = bytearray()
+        self._error: ProtocolError | None = None
+
+    @property
+    def buffered(self) -> int:
+        """Bytes received that do not yet form a complete frame."""
+        return len(self._buffer)
+
+    def feed(self, data: bytes) -> list[Frame]:
+        if self._error is not None:
+            raise ProtocolError(f"stream already failed: {self._error}")
+        self._buffer += data
+        frames: list[Frame] = []
+        try:
+            while (frame := self._next_frame()) is not None:
+                frames.append(frame)
+        except ProtocolError as exc:
+            self._error = exc
+            raise
+        return frames
+
+    def _next_frame(self) -> Frame | None:
+        buf = self._buffer
+        prefix = bytes(buf[: len(SYNC)])
+        if prefix != SYNC[: len(prefix)]:
+            raise ProtocolError(f"expected sync a0a0a0a0 at frame start, got {prefix.hex()}")
+        if len(buf) < HEADER_SIZE:
+            return None
+        _, version, ftype, length = _HEADER.unpack_from(buf, 0)
+        if version not in self._versions:
+            raise ProtocolError(f"expected header version in {sorted(self._versions)}, got {version} "
+                                f"(type 0x{ftype:04x})")
+        if length > self._max_body:
+            raise ProtocolError(f"frame type 0x{ftype:04x} declares {length} body bytes, more than the "
+                                f"limit {self._max_body}")
+        end = HEADER_SIZE + length
+        if len(buf) < end:
+            return None
+        body = bytes(buf[HEADER_SIZE:end])
+        del buf[:end]
+        return Frame(version, ftype, body)

@@ -1,0 +1,148 @@
+"""How each transport-neutral read item becomes native subpackets, and how their answers become its value.
+
+Sans-IO: `plan_item` turns a ReadItem into one ItemPlan (its request subpackets and a combiner);
+`item_result` turns the matching response subpackets back into the item's value or its own error.
+Most items are one subpacket; the clock is two (date and time) in the same PDU.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import date, datetime, time
+from typing import Any
+
+from edge.focas import functions as fn
+from edge.focas import items as it
+from edge.focas.errors import FocasError, NotSupported, OutOfRange
+from edge.focas.frame import RequestSubpacket, ResponseSubpacket
+from edge.focas.functions import Context, Function
+from edge.focas.values import SlotForm
+
+Combiner = Callable[[list[Any]], Any]
+
+
+def _first(values: list[Any]) -> Any:
+    return values[0]
+
+
+def _clock(values: list[Any]) -> datetime:
+    day, clock = values
+    assert isinstance(day, date) and isinstance(clock, time)
+    return datetime.combine(day, clock)
+
+
+@dataclass(frozen=True, slots=True)
+class ItemPlan:
+    """The subpackets one item needs and how to combine their decoded values; or why it cannot be read."""
+
+    item: it.ReadItem
+    calls: tuple[tuple[Function, RequestSubpacket], ...] = ()
+    combine: Combiner = _first
+    error: FocasError | None = None
+
+    @property
+    def requests(self) -> list[RequestSubpacket]:
+        return [req for _, req in self.calls]
+
+
+NO_WIRE_CODE = "no public FOCAS/Ethernet wire code is known for it (see docs/protocol.md)"
+
+_SIMPLE: dict[type[it.ReadItem], Function] = {
+    it.ReadSysInfo: fn.SYSINFO,
+    it.ReadStatus: fn.STATINFO,
+    it.ReadAlarmStatus: fn.ALARM_STATUS,
+    it.ReadProgramNumber: fn.PROGRAM_NUMBER,
+    it.ReadSequenceNumber: fn.SEQUENCE_NUMBER,
+    it.ReadExecProgramName: fn.EXEC_PROGRAM_NAME,
+    it.ReadMainProgramPath: fn.MAIN_PROGRAM_PATH,
+    it.ReadFeed: fn.ACTUAL_FEED,
+    it.ReadSpindleSpeed: fn.ACTUAL_SPINDLE_SPEED,
+    it.ReadAxisNames: fn.AXIS_NAMES,
+    it.ReadSpindleNames: fn.SPINDLE_NAMES,
+}
+
+# Item classes the native transport answers (ReadAlarmHistory has no public wire code).
+SUPPORTED_ITEMS: frozenset[str] = frozenset(
+    {cls.__name__ for cls in _SIMPLE}
+    | {"ReadActiveAlarms", "ReadProgramDirectory", "ReadSpindleLoad", "ReadPositions", "ReadServoMeter",
+       "ReadControlledAxes", "ReadParams", "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer"}
+)
+
+SPINDLE_LOAD_ARGS = (4, -1)  # HslCommunication: kind 4 = load, all spindles
+SERVO_METER_TYPE = 1  # as in the pyfanuc multi-subpacket capture
+PROGRAM_DIRECTORY_TYPE = 2  # pyfanuc listprog (HslCommunication sends 0)
+
+
+def pmc_byte_end(start: int, end: int, width: int) -> int:
+    """Inclusive last byte address covering whole elements: a word read of D2204..D2204 becomes ..2205."""
+    count = max(1, -(-(end - start + 1) // width))
+    return start + width * count - 1
+
+
+def _one(item: it.ReadItem, function: Function, *args: int, path: int) -> ItemPlan:
+    return ItemPlan(item, ((function, function.request(*args, path=path)),))
+
+
+def plan_item(item: it.ReadItem, ctx: Context, path: int = 1) -> ItemPlan:
+    """The native subpackets for `item` (errors in the item itself become the plan's error)."""
+    try:
+        return _plan(item, ctx, path)
+    except ValueError as exc:
+        return ItemPlan(item, error=OutOfRange(3, item.operation, message=str(exc)))
+
+
+def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
+    simple = _SIMPLE.get(type(item))
+    if simple is not None:
+        return _one(item, simple, path=path)
+    records_8 = ctx.slot_form is SlotForm.SCALED
+    match item:
+        case it.ReadActiveAlarms(max_count=count):
+            return _one(item, fn.ALARM_MESSAGES, -1, count, 2, fn.ALARM_TEXT_LEN, path=path)
+        case it.ReadProgramDirectory(start=start, count=count):
+            return _one(item, fn.PROGRAM_DIRECTORY, start, count, PROGRAM_DIRECTORY_TYPE, path=path)
+        case it.ReadSpindleLoad():
+            return _one(item, fn.SPINDLE_LOAD, *SPINDLE_LOAD_ARGS, path=path)
+        case it.ReadPositions(kind=kind):
+            return ItemPlan(item, ((fn.POSITIONS, fn.positions_request(kind, path)),))
+        case it.ReadServoMeter():
+            return _one(item, fn.SERVO_METER, SERVO_METER_TYPE, path=path)
+        case it.ReadControlledAxes(what=what):
+            return _one(item, fn.CONTROLLED_AXES, what, path=path)
+        case it.ReadParams(first=first, last=last, axis=axis):
+            function = fn.READ_PARAMS_8 if records_8 else fn.READ_PARAMS_4
+            return _one(item, function, first, last, axis, path=path)
+        case it.ReadDiag(first=first, last=last, axis=axis):
+            function = fn.READ_DIAG_8 if records_8 else fn.READ_DIAG_4
+            return _one(item, function, first, last, axis, path=path)
+        case it.ReadMacros(first=first, last=last):
+            if last < first:
+                raise ValueError(f"macro range #{first}..#{last} is empty")
+            return _one(item, fn.READ_MACROS, first, last, path=path)
+        case it.ReadPmc(area=area, start=start, end=end, data_type=data_type):
+            if end < start:
+                raise ValueError(f"PMC range {area}{start}..{area}{end} is empty")
+            last = pmc_byte_end(start, end, data_type.width)
+            return _one(item, fn.READ_PMC, start, last, fn.pmc_adr_type(area), int(data_type), path=path)
+        case it.ReadClock():
+            calls = tuple((fn.READ_CLOCK, fn.READ_CLOCK.request(part, path=path))
+                          for part in (fn.CLOCK_DATE, fn.CLOCK_TIME))
+            return ItemPlan(item, calls, _clock)
+        case it.ReadTimer(kind=kind):
+            return _one(item, fn.READ_TIMER, kind, path=path)
+        case it.ReadAlarmHistory():
+            return ItemPlan(item, error=NotSupported(item.operation, NO_WIRE_CODE))
+    return ItemPlan(item, error=NotSupported(item.operation, "the native transport does not know this item"))
+
+
+def item_result(plan: ItemPlan, answers: Sequence[ResponseSubpacket], ctx: Context) -> Any:
+    """The item's value, or the FocasError this item alone got (CNC return code or a bad payload)."""
+    if plan.error is not None:
+        return plan.error
+    try:
+        values = [function.decode_response(sub, req, ctx)
+                  for (function, req), sub in zip(plan.calls, answers, strict=True)]
+        return plan.combine(values)
+    except FocasError as exc:
+        return exc

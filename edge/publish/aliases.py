@@ -1,0 +1,70 @@
+"""Metric aliases: unique across the whole edge node (all devices), stable across restarts.
+
+A host maps alias -> metric from the births; keeping the same alias for the same (device, metric) across
+daemon restarts means historians and tag providers never see a metric change identity. The map only grows.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from edge.publish.state_store import StateStore
+
+log = logging.getLogger(__name__)
+
+NODE = ""  # the device id used for node-level metrics
+DOCUMENT = "sparkplug_aliases"
+
+
+class AliasMap:
+    """(device id, metric name) <-> alias, persisted in the state store when it grows."""
+
+    def __init__(self, store: StateStore | None = None) -> None:
+        self._store = store
+        self._by_key: dict[tuple[str, str], int] = {}
+        self._by_alias: dict[int, tuple[str, str]] = {}
+        self._dirty = False
+        if store is not None:
+            self._load(store)
+
+    def _load(self, store: StateStore) -> None:
+        doc = store.load(DOCUMENT)
+        if doc is None:
+            return
+        devices = doc.get("devices", {})
+        if not isinstance(devices, dict):
+            log.error("alias map ignored: 'devices' is not an object path=%s", store.path(DOCUMENT))
+            return
+        for device, names in devices.items():
+            if not isinstance(names, dict):
+                continue
+            for name, alias in names.items():
+                if isinstance(alias, int) and alias >= 0 and alias not in self._by_alias:
+                    self._by_key[(device, name)] = alias
+                    self._by_alias[alias] = (device, name)
+
+    def alias(self, device_id: str, name: str) -> int:
+        """The alias of a metric, allocating the next free one (never reused) the first time."""
+        key = (device_id, name)
+        found = self._by_key.get(key)
+        if found is not None:
+            return found
+        alias = max(self._by_alias, default=0) + 1
+        self._by_key[key] = alias
+        self._by_alias[alias] = key
+        self._dirty = True
+        return alias
+
+    def resolve(self, alias: int) -> tuple[str, str] | None:
+        """(device id, metric name) for an alias, or None if this node never assigned it."""
+        return self._by_alias.get(alias)
+
+    def save(self) -> None:
+        """Persist the map if it grew since the last save."""
+        if not self._dirty or self._store is None:
+            return
+        devices: dict[str, dict[str, int]] = {}
+        for (device, name), alias in self._by_key.items():
+            devices.setdefault(device, {})[name] = alias
+        self._store.save(DOCUMENT, {"version": 1, "devices": devices})
+        self._dirty = False

@@ -1,0 +1,443 @@
+"""The Sparkplug B edge-node session, sans-IO: state in, MQTT messages (topic, bytes) out.
+
+One object per daemon owns everything a host checks: seq (one counter for all node and device messages,
+assigned as each message is built, and the caller publishes in build order, so seq order is wire order),
+births from the last known values, alias-only DATA, DDEATH/NDEATH, the rebirth hold and command parsing.
+No sockets, no asyncio and no clock reads beyond the injected `clock`, so every rule is unit-testable.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from operator import attrgetter
+
+from edge.publish import payload as pl
+from edge.publish.aliases import NODE, AliasMap
+from edge.publish.sparkplug_b_pb2 import DataType, Payload
+from edge.samples import MetricSpec, MetricType, Quality, Sample
+
+log = logging.getLogger(__name__)
+
+NAMESPACE = "spBv1.0"
+_FORBIDDEN_ID_CHARS = frozenset("+/#")
+_by_timestamp = attrgetter("timestamp_ms")
+
+
+def now_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
+def check_id(kind: str, value: str) -> str:
+    """Sparkplug ids are non-empty UTF-8 without + / # (they are topic levels)."""
+    if not value or _FORBIDDEN_ID_CHARS.intersection(value):
+        raise ValueError(f"{kind} {value!r}: expected a non-empty string without '+', '/' or '#'")
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class Outgoing:
+    """One MQTT message to publish, in the order given."""
+
+    topic: str
+    payload: bytes
+    qos: int = 0
+    retain: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class RebirthRequested:
+    """An NCMD `Node Control/Rebirth` = true."""
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceCommand:
+    """A DCMD metric resolved against the device's DBIRTH and decoded to its declared type."""
+
+    device_id: str
+    metric_name: str
+    value: object
+
+
+@dataclass(frozen=True, slots=True)
+class CommandIgnored:
+    """A command metric that cannot be acted on; `reason` says why (for the log and counters)."""
+
+    reason: str
+    unknown: bool  # True: name/alias/device not known; False: known but rejected (read-only, bad value)
+
+
+CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
+
+
+@dataclass
+class _Device:
+    specs: dict[str, MetricSpec]
+    aliases: dict[str, int]  # metric name -> alias
+    last: dict[str, Sample] = field(default_factory=dict)
+    online: bool = False
+    not_good: set[str] = field(default_factory=set)  # published last with a non-GOOD quality
+
+
+class SparkplugNode:
+    """Births, data, deaths and commands for one edge node and its devices."""
+
+    def __init__(self, group_id: str, edge_node_id: str, aliases: AliasMap,
+                 clock: Callable[[], int] = now_ms) -> None:
+        self.group_id = check_id("group id", group_id)
+        self.edge_node_id = check_id("edge node id", edge_node_id)
+        self._aliases = aliases
+        self._clock = clock
+        self._seq = 0
+        self._bdseq: int | None = None
+        self.born = False  # an NBIRTH went out in the current MQTT session
+        self.holding = False  # a rebirth is pending: DATA stops until the births are re-sent
+        self._held_events: list[tuple[str, list[Sample]]] = []
+        self._node = _Device(specs={}, aliases={}, online=True)
+        self._devices: dict[str, _Device] = {}
+        self.unknown_metrics = 0
+        self.encode_errors = 0
+        self._warned: set[tuple[str, str]] = set()
+        base = f"{NAMESPACE}/{group_id}"
+        self.ncmd_topic = f"{base}/NCMD/{edge_node_id}"
+        self.dcmd_topic_filter = f"{base}/DCMD/{edge_node_id}/+"
+        self.ndeath_topic = f"{base}/NDEATH/{edge_node_id}"
+        self._nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
+        self._ndata_topic = f"{base}/NDATA/{edge_node_id}"
+        self._device_topic = f"{base}/{{kind}}/{edge_node_id}/{{device}}"
+
+    # -- session -------------------------------------------------------------------------------------
+
+    @property
+    def live(self) -> bool:
+        """DATA may be published now: born in this session and no rebirth pending."""
+        return self.born and not self.holding
+
+    @property
+    def bdseq(self) -> int | None:
+        return self._bdseq
+
+    def will(self, bdseq: int) -> Outgoing:
+        """The NDEATH registered as Will: QoS 1, not retained, only bdSeq (Int64), no seq."""
+        return Outgoing(self.ndeath_topic, pl.bdseq_payload(bdseq, self._clock()), qos=1, retain=False)
+
+    def session_started(self, bdseq: int) -> None:
+        """A CONNECT carrying `bdseq` was accepted; nothing is born in the new session yet."""
+        self._bdseq = bdseq
+        self.born = False
+        self.holding = False
+        self._held_events.clear()
+
+    def session_lost(self) -> None:
+        self.born = False
+        self.holding = False
+        self._held_events.clear()
+
+    def _next_seq(self) -> int:
+        seq = self._seq
+        self._seq = (seq + 1) & 0xFF
+        return seq
+
+    def births(self) -> list[Outgoing]:
+        """NBIRTH (seq 0, same bdSeq) then a DBIRTH per online device, then any events held by a rebirth."""
+        if self._bdseq is None:
+            raise RuntimeError("births requested before session_started(bdseq)")
+        self._seq = 0
+        ts = self._clock()
+        p = Payload(timestamp=ts, seq=self._next_seq())
+        p.metrics.add(name=pl.BDSEQ_METRIC, datatype=DataType.Int64, timestamp=ts, long_value=self._bdseq)
+        p.metrics.add(name=pl.REBIRTH_METRIC, datatype=DataType.Boolean, timestamp=ts, boolean_value=False)
+        self._add_birth_metrics(p, self._node, ts)
+        out = [Outgoing(self._nbirth_topic, p.SerializeToString())]
+        self.born = True
+        self.holding = False
+        for device_id, dev in self._devices.items():
+            if dev.online:
+                out.append(self._dbirth(device_id, dev))
+        held, self._held_events = self._held_events, []
+        for device_id, events in held:
+            out.extend(self.device_events(device_id, events))
+        return out
+
+    def _add_birth_metrics(self, p: Payload, dev: _Device, ts: int) -> None:
+        for name, spec in dev.specs.items():
+            sample = dev.last.get(name)
+            value = None if sample is None else sample.value
+            quality = Quality.GOOD if sample is None else sample.quality
+            try:
+                m = pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, value,
+                                        ts if sample is None else sample.timestamp_ms, unit=spec.unit,
+                                        quality=quality, description=spec.description)
+            except (TypeError, ValueError) as exc:
+                self._encode_failed(name, exc)
+                del p.metrics[-1]
+                pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, None, ts,
+                                    unit=spec.unit, quality=Quality.BAD, description=spec.description)
+                continue
+            if sample is not None and sample.historical:
+                m.is_historical = True
+        dev.not_good = {n for n, s in dev.last.items() if s.quality is not Quality.GOOD}
+
+    def _dbirth(self, device_id: str, dev: _Device) -> Outgoing:
+        ts = self._clock()
+        p = Payload(timestamp=ts, seq=self._next_seq())
+        self._add_birth_metrics(p, dev, ts)
+        return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), p.SerializeToString())
+
+    def request_rebirth(self) -> bool:
+        """Stop DATA at once (until births()); False if there is nothing born to rebirth."""
+        if not self.born:
+            return False
+        self.holding = True
+        return True
+
+    def ndeath(self) -> Outgoing:
+        """An explicit NDEATH before an intentional DISCONNECT (same bdSeq as the Will)."""
+        if self._bdseq is None:
+            raise RuntimeError("ndeath requested before session_started(bdseq)")
+        return self.will(self._bdseq)
+
+    def shutdown(self) -> list[Outgoing]:
+        """Clean shutdown: DDEATH for every online device, then NDEATH. Devices stay registered."""
+        out: list[Outgoing] = []
+        if self.born:
+            for device_id, dev in self._devices.items():
+                if dev.online:
+                    out.append(self._ddeath(device_id))
+        if self._bdseq is not None:
+            out.append(self.ndeath())
+        self.born = False
+        return out
+
+    # -- node metrics --------------------------------------------------------------------------------
+
+    def set_node_metrics(self, samples: Sequence[Sample]) -> list[Outgoing]:
+        """Record gateway metrics; NDATA for changed ones, or a full rebirth when a new metric appears."""
+        node = self._node
+        new = [s for s in samples if s.name not in node.specs]
+        for s in new:
+            check_metric_name(s.name)
+            node.specs[s.name] = MetricSpec(s.name, s.type)
+            node.aliases[s.name] = self._aliases.alias(NODE, s.name)
+        if new:
+            self._aliases.save()
+        changed = [s for s in samples if (old := node.last.get(s.name)) is None or old.value != s.value
+                   or old.quality is not s.quality]
+        for s in samples:
+            node.last[s.name] = s
+        if not self.live:
+            return []
+        if new:
+            return self.births()
+        if not changed:
+            return []
+        return [self._data(self._ndata_topic, node, changed)]
+
+    # -- devices -------------------------------------------------------------------------------------
+
+    def device_online(self, device_id: str, specs: Sequence[MetricSpec],
+                      samples: Sequence[Sample]) -> list[Outgoing]:
+        """Declare a device with every metric it will report; DBIRTH now if the node is born."""
+        check_id("device id", device_id)
+        spec_map: dict[str, MetricSpec] = {}
+        for spec in specs:
+            check_metric_name(spec.name)
+            spec_map[spec.name] = spec
+        aliases = {name: self._aliases.alias(device_id, name) for name in spec_map}
+        self._aliases.save()
+        old = self._devices.get(device_id)
+        dev = _Device(specs=spec_map, aliases=aliases, online=True)
+        if old is not None:
+            dev.last = {n: s for n, s in old.last.items() if n in spec_map}
+        for s in samples:
+            if s.name in spec_map:
+                dev.last[s.name] = s
+        self._devices[device_id] = dev
+        if not self.live:
+            return []
+        return [self._dbirth(device_id, dev)]
+
+    def device_data(self, device_id: str, samples: Sequence[Sample]) -> list[Outgoing]:
+        """Record new values; DDATA (alias only, metric timestamp = the CNC's) when live and online."""
+        dev = self._devices.get(device_id)
+        if dev is None:
+            self._unknown(device_id, "<device>")
+            return []
+        known = self._known(device_id, dev, samples)
+        last = dev.last
+        for s in known:
+            last[s.name] = s
+        if not (self.live and dev.online) or not known:
+            return []
+        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
+
+    def device_events(self, device_id: str, events: Sequence[Sample]) -> list[Outgoing]:
+        """Events (alarm raise/clear, history) as DDATA with their own occurrence time; held in a rebirth."""
+        dev = self._devices.get(device_id)
+        if dev is None:
+            self._unknown(device_id, "<device>")
+            return []
+        known = self._known(device_id, dev, events)
+        if not known:
+            return []
+        if self.holding:
+            self._held_events.append((device_id, list(known)))
+            return []
+        if not (self.live and dev.online):
+            return []
+        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
+
+    def device_offline(self, device_id: str) -> list[Outgoing]:
+        """DDEATH (with seq) if the device was born in this session; it keeps its aliases and values."""
+        dev = self._devices.get(device_id)
+        if dev is None or not dev.online:
+            return []
+        dev.online = False
+        if not self.born:
+            return []
+        return [self._ddeath(device_id)]
+
+    def is_online(self, device_id: str) -> bool:
+        dev = self._devices.get(device_id)
+        return dev is not None and dev.online
+
+    def device_ids(self) -> list[str]:
+        return list(self._devices)
+
+    def _ddeath(self, device_id: str) -> Outgoing:
+        ts = self._clock()
+        p = Payload(timestamp=ts, seq=self._next_seq())
+        return Outgoing(self._device_topic.format(kind="DDEATH", device=device_id), p.SerializeToString())
+
+    def _known(self, device_id: str, dev: _Device, samples: Sequence[Sample]) -> Sequence[Sample]:
+        specs = dev.specs
+        for s in samples:
+            if s.name not in specs:
+                break
+        else:
+            return samples
+        known = []
+        for s in samples:
+            if s.name in specs:
+                known.append(s)
+            else:
+                self._unknown(device_id, s.name)
+        return known
+
+    def _unknown(self, device_id: str, name: str) -> None:
+        self.unknown_metrics += 1
+        if (device_id, name) not in self._warned:
+            self._warned.add((device_id, name))
+            log.warning("metric not declared in the birth, not published device=%s metric=%s",
+                        device_id or "<node>", name)
+
+    def _encode_failed(self, name: str, exc: Exception) -> None:
+        self.encode_errors += 1
+        log.warning("metric value cannot be encoded metric=%s error=%s", name, exc)
+
+    def _data(self, topic: str, dev: _Device, samples: Sequence[Sample]) -> Outgoing:
+        """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality)."""
+        ts = self._clock()
+        p = Payload(timestamp=ts, seq=self._next_seq())
+        metrics = p.metrics
+        aliases = dev.aliases
+        specs = dev.specs
+        not_good = dev.not_good
+        writers = pl.DATA_WRITERS
+        good = Quality.GOOD
+        for s in sorted(samples, key=_by_timestamp):
+            name = s.name
+            value = s.value
+            try:
+                if value is None:
+                    m = metrics.add(alias=aliases[name], timestamp=s.timestamp_ms, is_null=True)
+                else:
+                    m = writers[specs[name].type](metrics, aliases[name], s.timestamp_ms, value)
+            except (TypeError, ValueError) as exc:
+                self._encode_failed(name, exc)
+                m = metrics.add(alias=aliases[name], timestamp=s.timestamp_ms, is_null=True)
+                pl.add_quality(m, Quality.BAD)
+                not_good.add(name)
+                continue
+            if s.historical:
+                m.is_historical = True
+            if s.quality is not good:
+                pl.add_quality(m, s.quality)
+                not_good.add(name)
+            elif name in not_good:
+                pl.add_quality(m, good)  # tell the host the value is good again
+                not_good.discard(name)
+        return Outgoing(topic, p.SerializeToString())
+
+    # -- commands ------------------------------------------------------------------------------------
+
+    def parse_command(self, topic: str, data: bytes) -> list[CommandEvent]:
+        """NCMD/DCMD -> events; anything unusable becomes CommandIgnored with the reason."""
+        parts = topic.split("/")
+        mine = len(parts) >= 4 and parts[0] == NAMESPACE and parts[1] == self.group_id
+        if not mine or parts[3] != self.edge_node_id:
+            return [CommandIgnored(f"topic {topic!r} is not a command for this node", unknown=True)]
+        try:
+            p = pl.decode(data)
+        except ValueError as exc:
+            return [CommandIgnored(f"{topic}: {exc}", unknown=False)]
+        if parts[2] == "NCMD" and len(parts) == 4:
+            return [self._node_command(m) for m in p.metrics]
+        if parts[2] == "DCMD" and len(parts) == 5:
+            return [self._device_command(parts[4], m) for m in p.metrics]
+        expected = "expected NCMD/<edge> or DCMD/<edge>/<device>"
+        return [CommandIgnored(f"topic {topic!r}: {expected}", unknown=True)]
+
+    def _resolve(self, device_key: str, m: Payload.Metric) -> str | None:
+        if m.HasField("name") and m.name:
+            return m.name
+        if m.HasField("alias"):
+            found = self._aliases.resolve(m.alias)
+            if found is not None and found[0] == device_key:
+                return found[1]
+        return None
+
+    def _node_command(self, m: Payload.Metric) -> CommandEvent:
+        name = self._resolve(NODE, m)
+        if name == pl.REBIRTH_METRIC:
+            try:
+                value = pl.get_value(m, MetricType.BOOLEAN)
+            except ValueError as exc:
+                return CommandIgnored(f"NCMD {name}: {exc}", unknown=False)
+            if value:
+                return RebirthRequested()
+            return CommandIgnored(f"NCMD {name}: value false, nothing to do", unknown=False)
+        if name is None:
+            return CommandIgnored(f"NCMD metric {_describe(m)}: expected a known name or alias", unknown=True)
+        known = name in self._node.specs
+        return CommandIgnored(f"NCMD {name}: node metric is not writable", unknown=not known)
+
+    def _device_command(self, device_id: str, m: Payload.Metric) -> CommandEvent:
+        dev = self._devices.get(device_id)
+        if dev is None:
+            return CommandIgnored(f"DCMD for unknown device {device_id!r}", unknown=True)
+        name = self._resolve(device_id, m)
+        spec = dev.specs.get(name) if name is not None else None
+        if name is None or spec is None:
+            return CommandIgnored(f"DCMD {device_id}: metric {_describe(m)} not in its DBIRTH", unknown=True)
+        if not spec.writable:
+            return CommandIgnored(f"DCMD {device_id}: metric {name!r} is read-only", unknown=False)
+        try:
+            value = pl.get_value(m, spec.type)
+        except ValueError as exc:
+            return CommandIgnored(f"DCMD {device_id} {name}: {exc}", unknown=False)
+        return DeviceCommand(device_id, name, value)
+
+
+def _describe(m: Payload.Metric) -> str:
+    if m.HasField("name"):
+        return f"name={m.name!r}"
+    return f"alias={m.alias}" if m.HasField("alias") else "without name or alias"
+
+
+def check_metric_name(name: str) -> str:
+    if not name or name.startswith("/") or name.endswith("/") or "//" in name:
+        raise ValueError(f"metric name {name!r}: expected non-empty '/'-separated folders and a leaf name")
+    return name

@@ -1,0 +1,131 @@
+"""Property tests on the framer: any split decodes the same, and any bytes at all only ever give frames
+or a ProtocolError, quickly."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Any
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from edge.focas.errors import ProtocolError
+from edge.focas.frame import (
+    FrameDecoder,
+    RequestSubpacket,
+    ResponseSubpacket,
+    decode_request_body,
+    decode_response_body,
+    encode_request,
+    encode_response,
+)
+from edge.focas.functions import BY_COMMAND, Context
+from edge.focas.values import SlotForm
+
+u16 = st.integers(0, 0xFFFF)
+i16 = st.integers(-(2**15), 2**15 - 1)
+i32 = st.integers(-(2**31), 2**31 - 1)
+
+request_subpackets = st.builds(
+    RequestSubpacket, u16, u16, st.tuples(i32, i32, i32, i32, i32), st.binary(max_size=40), u16)
+response_subpackets = st.builds(ResponseSubpacket, u16, u16, i16, i16, st.binary(max_size=60), u16)
+responses = st.builds(lambda subs, version: encode_response(subs, version),
+                      st.lists(response_subpackets, max_size=6), st.integers(1, 4))
+
+TIME_BOUND = 1.0  # seconds for one decode of at most a few KB; generous for slow CI
+
+
+def _decode_everything(data: bytes, chunk: int = 0) -> list[Any]:
+    """Frames and their bodies as far as they go; ProtocolError is the only allowed failure."""
+    decoder = FrameDecoder()
+    out: list[Any] = []
+    pieces = [data] if chunk <= 0 else [data[i : i + chunk] for i in range(0, len(data), chunk)]
+    for piece in pieces:
+        for frame in decoder.feed(piece):
+            out.append(frame)
+            if frame.type == 0x2102:
+                subs = decode_response_body(frame.body)
+                out.append(subs)
+                for sub in subs:
+                    function = BY_COMMAND.get((sub.cls, sub.command))
+                    if function is not None and sub.rc == 0:
+                        req = function.request(1, 2, 1, 1)
+                        out.append(function.decode_payload(sub.payload, req,
+                                                           Context(4, SlotForm.SCALED)))
+            elif frame.type == 0x2101:
+                out.append(decode_request_body(frame.body))
+    return out
+
+
+@given(st.lists(request_subpackets, max_size=6))
+def test_request_round_trip(subs: list[RequestSubpacket]) -> None:
+    (frame,) = FrameDecoder().feed(encode_request(subs))
+    assert decode_request_body(frame.body) == subs
+
+
+@given(st.lists(response_subpackets, max_size=6), st.integers(1, 4))
+def test_response_round_trip(subs: list[ResponseSubpacket], version: int) -> None:
+    (frame,) = FrameDecoder().feed(encode_response(subs, version))
+    assert frame.version == version
+    assert decode_response_body(frame.body) == subs
+
+
+@given(st.lists(responses, min_size=1, max_size=4), st.integers(1, 50))
+def test_any_split_decodes_identically(frames: list[bytes], chunk: int) -> None:
+    stream = b"".join(frames)
+    whole = FrameDecoder().feed(stream)
+    decoder = FrameDecoder()
+    split = [f for i in range(0, len(stream), chunk) for f in decoder.feed(stream[i : i + chunk])]
+    assert split == whole and len(whole) == len(frames)
+    byte_wise = FrameDecoder()
+    assert [f for b in stream for f in byte_wise.feed(bytes([b]))] == whole
+
+
+@given(st.binary(max_size=2000), st.integers(0, 64))
+def test_random_bytes_only_raise_protocol_error(data: bytes, chunk: int) -> None:
+    started = time.monotonic()
+    with contextlib.suppress(ProtocolError):
+        _decode_everything(data, chunk)
+    assert time.monotonic() - started < TIME_BOUND
+
+
+@st.composite
+def mutated_frames(draw: st.DrawFn) -> bytes:
+    """A valid response with a few bytes flipped, inserted or cut: the shape garbage usually has."""
+    data = bytearray(draw(responses))
+    for _ in range(draw(st.integers(1, 4))):
+        action = draw(st.sampled_from(["flip", "insert", "delete", "truncate"]))
+        position = draw(st.integers(0, max(0, len(data) - 1)))
+        if action == "flip" and data:
+            data[position] ^= draw(st.integers(1, 255))
+        elif action == "insert":
+            data[position:position] = draw(st.binary(min_size=1, max_size=4))
+        elif action == "delete" and data:
+            del data[position]
+        elif action == "truncate":
+            del data[position:]
+    return bytes(data)
+
+
+@given(mutated_frames(), st.integers(0, 16))
+def test_mutated_frames_only_raise_protocol_error(data: bytes, chunk: int) -> None:
+    started = time.monotonic()
+    with contextlib.suppress(ProtocolError):
+        _decode_everything(data, chunk)
+    assert time.monotonic() - started < TIME_BOUND
+
+
+@given(st.integers(0, 0xFFFF), st.binary(max_size=100))
+def test_header_with_any_length_never_overbuffers(length: int, tail: bytes) -> None:
+    decoder = FrameDecoder(max_body=1024)
+    header = b"\xa0\xa0\xa0\xa0\x00\x02\x21\x02" + length.to_bytes(2, "big")
+    body = tail[:length]
+    try:
+        frames = decoder.feed(header + body)
+    except ProtocolError:
+        assert length > 1024
+    else:
+        assert length <= 1024
+        assert decoder.buffered == (0 if frames else 10 + len(body))
+        assert len(frames) == (1 if len(body) == length else 0)
