@@ -6,7 +6,7 @@ path in the file (`machines[2].poll.pmc[0].range: end 100 before start 103`). Un
 comes from an environment variable (`password_env`) or a file (`password_file`, e.g. a systemd or
 Docker secret); a literal `password:` key is refused.
 
-Durations accept seconds as a number or a string with a unit (`250ms`, `1s`, `5m`, `1h`). Soft
+Durations accept seconds as a number or a string with a unit (`250ms`, `1s`, `5m`, `1h`, `7d`). Soft
 findings (a history depth clamped to 1..250) do not fail the load; they are listed in
 `Config.warnings` for the caller to log.
 """
@@ -64,8 +64,9 @@ RESERVED_FOLDERS = ("Status", "Program", "Spindle", "Axis", "Alarm", "Clock", "F
 
 # ---- small value types ---------------------------------------------------------------------------
 
-_DURATION_RE = re.compile(r"\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min|h)?\s*", re.ASCII)
-_DURATION_UNITS = {"ms": 0.001, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}
+_DURATION_RE = re.compile(r"\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min|h|d)?\s*", re.ASCII)
+_DURATION_UNITS = {"ms": 0.001, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0,
+                   "d": 86400.0}
 
 
 def _parse_duration(value: object) -> object:
@@ -73,7 +74,7 @@ def _parse_duration(value: object) -> object:
     if isinstance(value, str):
         match = _DURATION_RE.fullmatch(value)
         if match is None:
-            raise ValueError(f"expected a duration like 250ms, 1s, 5m or a number of seconds, got {value!r}")
+            raise ValueError(f"expected a duration like 250ms, 1s, 5m, 2h, 7d or a number of seconds, got {value!r}")
         return float(match[1]) * _DURATION_UNITS[match[2]]
     if isinstance(value, bool):
         raise ValueError(f"expected a duration, got {value!r}")

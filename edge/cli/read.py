@@ -131,11 +131,13 @@ def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) ->
 
 
 def _records(records: Sequence[ParamRecord], bit: int | None) -> object:
+    def pick(value: object) -> object:
+        return (value >> bit) & 1 if bit is not None and isinstance(value, int) else value
+
     def one(record: ParamRecord) -> object:
-        value = record.value if len(record.values) == 1 or record.axis != -1 else list(record.values)
-        if bit is not None and isinstance(value, int):
-            return (value >> bit) & 1
-        return value
+        if len(record.values) > 1 and record.axis == -1:  # a per-axis parameter read for every axis
+            return [pick(v) for v in record.values]
+        return pick(record.value)
 
     if len(records) == 1:
         return one(records[0])

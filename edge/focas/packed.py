@@ -126,7 +126,8 @@ def status_error(status: int, command: int) -> CncError | None:
         return None
     function = command_name(command)
     if status in _ACCESS_DENIED_STATUSES:
-        return AccessDenied(EW_PASSWD, function, message=f"packed-surface status {status} (EW_PASSWD)")
+        return AccessDenied(EW_PASSWD, function, message=(
+            f"packed status {status}: parameter-write switch off or CNC not in MDI"))
     return cnc_error(status, function)
 
 

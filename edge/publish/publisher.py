@@ -183,7 +183,7 @@ class Publisher:
             messages = self._node.shutdown()
             if messages:
                 last = messages[-1]  # the NDEATH: confirmed before the DISCONNECT
-                self._send_spb(messages[:-1])
+                self._send_spb(messages[:-1], spb)
         else:
             self._node.shutdown()
         await self._confirm_then_disconnect(spb, last, with_will=True)
@@ -434,8 +434,8 @@ class Publisher:
         source = CommandSource("sparkplug", msg.topic)
         self._spawn(_await(handler(event.device_id, event.metric_name, event.value, source)))
 
-    def _send_spb(self, messages: Sequence[Outgoing]) -> None:
-        conn = self._spb
+    def _send_spb(self, messages: Sequence[Outgoing], conn: MqttConnection | None = None) -> None:
+        conn = conn or self._spb
         for m in messages:
             if conn is not None and conn.publish(m.topic, m.payload, m.qos, m.retain):
                 self._counters["published"] += 1

@@ -56,6 +56,10 @@ class Observer:
         with self._lock:
             self.messages.append(Received(msg.topic, bytes(msg.payload), msg.qos, bool(msg.retain)))
 
+    def expect_reconnect(self) -> None:
+        """Call before taking the broker down, then wait_resubscribed()."""
+        self._subscribed.clear()
+
     async def wait_resubscribed(self, timeout: float = 15.0) -> None:
         await async_wait_for(self._subscribed.is_set, timeout, message="observer resubscribed")
 

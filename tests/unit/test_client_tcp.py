@@ -359,6 +359,8 @@ def test_open_session_and_addresses() -> None:
             parse_address(bad)
     with pytest.raises(ConfigError, match="TCP only"):
         open_session("focas", "unix:/run/cnc.sock")
+    packed = open_session("packed", "unix:/run/cnc.sock")  # imported lazily, address passed through
+    assert packed.transport == "packed"
     with pytest.raises(ConfigError, match="expected one of focas, packed"):
         open_session("serial", "x")
 

@@ -1,0 +1,33 @@
+"""`focas-edge run --config FILE`: the collector daemon."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from edge import ConfigError
+from edge.cli import EXIT_USAGE
+
+log = logging.getLogger(__name__)
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    parser = subparsers.add_parser(
+        "run", help="run the collector daemon",
+        description="Poll every configured CNC and publish what changes to MQTT (Sparkplug B 3.0 and/or JSON). "
+                    "SIGTERM stops cleanly (DDEATH, NDEATH, close PDUs); SIGHUP reloads the config file.")
+    parser.add_argument("--config", "-c", type=Path, default=Path("/etc/focas-edge/edge.yaml"),
+                        help="the YAML config file (default /etc/focas-edge/edge.yaml)")
+    parser.set_defaults(func=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    from edge.daemon import run_daemon
+
+    try:
+        return run_daemon(args.config)
+    except ConfigError as exc:
+        print(f"focas-edge: {exc}", file=sys.stderr)
+        return EXIT_USAGE

@@ -1,0 +1,340 @@
+"""One machine's polling loop: connect, read static data, then tick until the session breaks.
+
+A tick batches every due group plus the CNC clock into ONE request (one network round trip), turns
+the results into samples stamped with CNC time, and hands what changed to the sink. A failed item
+only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is dropped
+from this machine's plan with one log line. A broken session ends in device_offline, backoff, and
+a fresh birth with the full state on recovery.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import random
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Protocol
+
+from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_exponential_jitter
+
+from edge.collect import plan as pl
+from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
+from edge.collect.changes import ChangeDetector
+from edge.collect.clock import ClockTracker, ClockTransition
+from edge.config import AlarmsConfig, MachineConfig
+from edge.focas import items as it
+from edge.focas.connect import open_session
+from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
+from edge.focas.model import ActiveAlarm, AlarmHistoryEntry
+from edge.focas.session import CncSession
+from edge.samples import MetricSpec, MetricType, Quality, Sample
+
+log = logging.getLogger(__name__)
+
+DROPPED_FUNCTIONS = MetricSpec("Plan/DroppedFunctions", MetricType.STRING,
+                               description="functions this control does not answer (EW_FUNC/EW_NOOPT)")
+CONNECTED = MetricSpec("Connection/Online", MetricType.BOOLEAN)
+
+
+class DeviceSink(Protocol):
+    """Where a machine's data goes (the Publisher implements it)."""
+
+    async def device_online(self, device_id: str, specs: Sequence[MetricSpec],
+                            samples: Sequence[Sample]) -> None: ...
+
+    async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None: ...
+
+    async def device_events(self, device_id: str, events: Sequence[Sample]) -> None: ...
+
+    async def device_offline(self, device_id: str) -> None: ...
+
+
+@dataclass
+class PollerStats:
+    """Counters the daemon publishes as node metrics and on /metrics."""
+
+    ticks: int = 0
+    overruns: int = 0
+    skipped: int = 0
+    connects: int = 0
+    disconnects: int = 0
+    item_errors: dict[str, int] = field(default_factory=dict)  # by EW name or error class
+    last_cycle_s: float = 0.0
+    cycle_times: list[float] = field(default_factory=list)  # recent cycle wall times (bounded)
+
+    def count_error(self, error: FocasError) -> None:
+        key = getattr(error, "name", None) or type(error).__name__
+        self.item_errors[key] = self.item_errors.get(key, 0) + 1
+
+    def record_cycle(self, seconds: float) -> None:
+        self.last_cycle_s = seconds
+        self.cycle_times.append(seconds)
+        if len(self.cycle_times) > 1000:
+            del self.cycle_times[:500]
+
+
+@dataclass
+class TickResult:
+    samples: list[Sample]
+    events: list[Sample]  # alarm raise/clear
+    history: list[AlarmHistoryEntry]  # new alarm-history entries, oldest first
+
+
+SessionFactory = Callable[[MachineConfig], CncSession]
+
+
+def default_session(machine: MachineConfig) -> CncSession:
+    timeouts = machine.timeouts
+    return open_session(machine.transport, machine.endpoint, timeout=timeouts.request_s,
+                        connect_timeout=timeouts.connect_s, backoff_initial=timeouts.backoff_initial_s,
+                        backoff_max=timeouts.backoff_max_s)
+
+
+class MachinePoller:
+    """Owns one machine's session and polling task; `run()` until cancelled, `close()` after."""
+
+    def __init__(self, machine: MachineConfig, alarms: AlarmsConfig, sink: DeviceSink, state_dir: Path,
+                 session_factory: SessionFactory = default_session, jitter_s: float = 1.0) -> None:
+        self.machine = machine
+        self.alarms_config = alarms
+        self.sink = sink
+        self.session = session_factory(machine)
+        self.stats = PollerStats()
+        self.online = False
+        self.last_progress = time.monotonic()
+        self.clock = ClockTracker(machine.zone, machine.max_skew_s)
+        self._jitter_s = jitter_s
+        self._changes = ChangeDetector()
+        self._alarms = ActiveAlarmProjection()
+        history_store = WatermarkStore(state_dir, machine.id)
+        self._history = AlarmHistoryDedup(history_store)
+        self._dropped: set[str] = set()
+        self._plan: pl.MachinePlan | None = None
+
+    @property
+    def machine_id(self) -> str:
+        return self.machine.id
+
+    # ---- lifecycle -----------------------------------------------------------------------------------
+    async def run(self) -> None:
+        """Connect (with backoff), poll until the session breaks, go offline, repeat. Cancel to stop."""
+        await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
+        while True:
+            await self._connect()
+            try:
+                await self._poll_session()
+            except FocasError as exc:
+                log.warning("session lost machine=%s error=%s", self.machine_id, exc)
+            finally:
+                await self._go_offline()
+                await self.session.reset()
+
+    async def close(self) -> None:
+        """Send the close PDU (the run task must already be cancelled)."""
+        with contextlib.suppress(Exception):
+            await self.session.close()
+
+    async def _connect(self) -> None:
+        timeouts = self.machine.timeouts
+
+        def before_sleep(state: RetryCallState) -> None:
+            self.last_progress = time.monotonic()
+            error = state.outcome.exception() if state.outcome else None
+            delay = state.next_action.sleep if state.next_action else 0.0
+            log.warning("connect failed machine=%s attempt=%d error=%s retry_in=%.2fs",
+                        self.machine_id, state.attempt_number, error, delay)
+
+        retrying = AsyncRetrying(
+            retry=retry_if_exception_type(FocasError),
+            wait=wait_exponential_jitter(initial=timeouts.backoff_initial_s, max=timeouts.backoff_max_s),
+            before_sleep=before_sleep,
+            reraise=True,
+        )
+        async for attempt in retrying:
+            with attempt:
+                await self.session.connect()
+        self.stats.connects += 1
+        self.last_progress = time.monotonic()
+        log.info("connected machine=%s endpoint=%s model=%s", self.machine_id, self.machine.endpoint,
+                 self.session.sysinfo.model_name if self.session.sysinfo else "?")
+
+    async def _go_offline(self) -> None:
+        if not self.online:
+            return
+        self.online = False
+        self.stats.disconnects += 1
+        with contextlib.suppress(Exception):
+            await self.sink.device_offline(self.machine_id)
+
+    # ---- one session ---------------------------------------------------------------------------------
+    async def _poll_session(self) -> None:
+        static = await self._read_static()
+        plan = pl.MachinePlan.build(self.machine, self.alarms_config, static)
+        for operation in list(self._dropped) + self._unsupported(plan):
+            plan = plan.without(operation)
+        self._plan = plan
+        schedule = pl.Schedule(plan.periods)
+        schedule.start(time.monotonic())
+        schedule.due(time.monotonic())  # static group already read above
+        self._changes = ChangeDetector(plan.deadbands())
+        first = await self._tick(plan, set(plan.periods))
+        specs = [*plan.metrics(), DROPPED_FUNCTIONS]
+        first.samples.append(self._dropped_sample(first.samples))
+        await self.sink.device_online(self.machine_id, specs, self._changes.filter(first.samples))
+        self.online = True
+        if first.events or first.history:
+            await self._emit_events(first.events, first.history)
+        fastest = min(plan.periods.values())
+        while True:
+            next_due = schedule.next_due() or time.monotonic() + fastest
+            await asyncio.sleep(max(0.0, next_due - time.monotonic()))
+            started = time.monotonic()
+            groups = schedule.due(started)
+            self.stats.skipped = schedule.skipped
+            if not groups:
+                continue
+            plan = self._plan or plan
+            tick = await self._tick(plan, groups)
+            changed = self._changes.filter(tick.samples)
+            if changed:
+                await self.sink.device_data(self.machine_id, changed)
+            if tick.events or tick.history:
+                await self._emit_events(tick.events, tick.history)
+            elapsed = time.monotonic() - started
+            if elapsed > fastest:
+                self.stats.overruns += 1
+
+    async def _read_static(self) -> pl.StaticInfo:
+        results = await self.session.batch([it.ReadAxisNames(), it.ReadSpindleNames()])
+        axes = results[0] if isinstance(results[0], list) else []
+        spindles = results[1] if isinstance(results[1], list) else []
+        for result in results:
+            if isinstance(result, FocasError):
+                log.info("static read failed machine=%s error=%s", self.machine_id, result)
+        return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
+                             tuple(str(s) for s in spindles))
+
+    def _unsupported(self, plan: pl.MachinePlan) -> list[str]:
+        capabilities = self.session.capabilities
+        missing = sorted({r.item.operation for r in plan.reads if not capabilities.can(r.item.operation)})
+        for operation in missing:
+            log.info("not polled machine=%s operation=%s reason=not supported by the %s transport",
+                     self.machine_id, operation, capabilities.transport)
+        return missing
+
+    async def _tick(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickResult:
+        """One batched round trip for the due groups."""
+        reads = [r for r in plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})]
+        items: list[it.ReadItem] = [r.item for r in reads]
+        items.append(it.ReadClock())
+        wall_before, mono_before = time.time(), time.monotonic()
+        results = await self.session.batch(items)
+        mono_after, wall_after = time.monotonic(), time.time()
+        self.last_progress = mono_after
+        self.stats.ticks += 1
+        self.stats.record_cycle(mono_after - mono_before)
+        mid_mono = (mono_before + mono_after) / 2
+        mid_wall = (wall_before + wall_after) / 2
+        timestamp = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
+
+        samples: list[Sample] = []
+        events: list[Sample] = []
+        alarm_status: int | None = None
+        history: list[AlarmHistoryEntry] | None = None
+        for read, result in zip(reads, results, strict=False):
+            if isinstance(result, FocasError):
+                self._item_failed(read, result, timestamp, samples)
+                continue
+            if isinstance(read.item, it.ReadAlarmStatus):
+                alarm_status = int(result)
+            if isinstance(read.item, it.ReadAlarmHistory):
+                history = list(result)
+                continue
+            samples.extend(Sample(spec.name, value, spec.type, timestamp,
+                                  Quality.GOOD if value is not None else Quality.BAD)
+                           for spec, value in pl.metric_values(read, result))
+        samples.extend(self._clock_samples(timestamp))
+        if alarm_status is not None and self._alarms.status_changed(alarm_status):
+            events.extend(await self._read_active_alarms(plan, timestamp, samples))
+        fresh = self._history_entries(history) if history else []
+        return TickResult(samples, events, fresh)
+
+    def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> int:
+        if isinstance(result, datetime):
+            transition = self.clock.observe(result, mid_mono, mid_wall, half_rtt)
+            if transition is ClockTransition.TO_GATEWAY:
+                log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
+            elif transition is ClockTransition.TO_CNC:
+                log.info("using CNC time again machine=%s skew=%.3fs", self.machine_id,
+                         self.clock.skew_s or 0.0)
+        elif isinstance(result, FocasError):
+            self.stats.count_error(result)
+        return self.clock.source_time_ms(mid_mono, mid_wall)
+
+    def _clock_samples(self, timestamp: int) -> list[Sample]:
+        skew = self.clock.skew_s
+        return [
+            Sample(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
+                   timestamp, Quality.GOOD if skew is not None else Quality.BAD),
+            Sample(pl.CLOCK_GATEWAY.name, self.clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
+        ]
+
+    def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
+                     samples: list[Sample]) -> None:
+        self.stats.count_error(error)
+        if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
+            operation = read.item.operation
+            if operation not in self._dropped:
+                self._dropped.add(operation)
+                self._plan = self._plan.without(operation)
+                log.warning("dropped from plan machine=%s operation=%s error=%s", self.machine_id,
+                            operation, error)
+                samples.append(self._dropped_sample(samples, timestamp))
+        samples.extend(Sample(spec.name, None, spec.type, timestamp, Quality.BAD) for spec in read.metrics)
+
+    def _dropped_sample(self, samples: Sequence[Sample], timestamp: int | None = None) -> Sample:
+        when = timestamp if timestamp is not None else (samples[0].timestamp_ms if samples else
+                                                        int(time.time() * 1000))
+        return Sample(DROPPED_FUNCTIONS.name, ",".join(sorted(self._dropped)), DROPPED_FUNCTIONS.type, when)
+
+    async def _read_active_alarms(self, plan: pl.MachinePlan, timestamp: int,
+                                  samples: list[Sample]) -> list[Sample]:
+        """The alarm status word changed: read the messages (a second round trip, only on change)."""
+        reads = plan.reads_for({pl.Group.ACTIVE_ALARMS})
+        if not reads:
+            return []
+        (result,) = await self.session.batch([reads[0].item])
+        if isinstance(result, FocasError):
+            self._item_failed(reads[0], result, timestamp, samples)
+            return []
+        alarms: list[ActiveAlarm] = list(result)
+        samples.extend(Sample(spec.name, value, spec.type, timestamp)
+                       for spec, value in pl.metric_values(reads[0], alarms))
+        return [Sample(pl.ALARM_EVENT.name, json.dumps(event.as_dict(), separators=(",", ":")),
+                       pl.ALARM_EVENT.type, timestamp)
+                for event in self._alarms.update(alarms, timestamp)]
+
+    def _history_entries(self, entries: list[AlarmHistoryEntry]) -> list[AlarmHistoryEntry]:
+        """Ring entries not yet published, oldest first, with their true occurrence instant.
+
+        The ring holds CNC wall-clock fields (the packed decoder labels them UTC): they are re-read in
+        the machine's time zone.
+        """
+        zone = self.machine.zone
+        local = [AlarmHistoryEntry(e.occurred.replace(tzinfo=zone), e.axis_no, e.alm_type, e.alm_no,
+                                   e.message) for e in entries]
+        return self._history.new_entries(local)
+
+    async def _emit_events(self, events: list[Sample], history: list[AlarmHistoryEntry]) -> None:
+        """Publish alarm events; history entries count as published (watermark saved) only after that."""
+        history_samples = [Sample(pl.ALARM_HISTORY.name, json.dumps(history_event(e), separators=(",", ":")),
+                                  pl.ALARM_HISTORY.type, round(e.occurred.timestamp() * 1000))
+                           for e in history]
+        await self.sink.device_events(self.machine_id, [*events, *history_samples])
+        self._history.commit(history)

@@ -1,0 +1,254 @@
+"""The collector daemon: one publisher, one poller per machine, signals, reload and the watchdog.
+
+SIGTERM/SIGINT: stop polling, DDEATH every machine, NDEATH, DISCONNECT, close PDUs to the CNCs, exit 0.
+SIGHUP: reload the config without dropping the broker session; machines added, removed or changed get
+their DBIRTH/DDEATH. The systemd watchdog is pinged only while every poll loop makes progress.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import platform
+import signal
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from edge import ConfigError, __version__
+from edge.collect.poller import MachinePoller, SessionFactory, default_session
+from edge.config import Config, MachineConfig, load_config
+from edge.publish.publisher import Publisher
+from edge.publish.settings import PublishSettings
+from edge.samples import MetricType, Sample
+from edge.sdnotify import SystemdNotifier
+
+log = logging.getLogger(__name__)
+
+NODE_METRICS_PERIOD_S = 5.0
+
+
+def publish_settings(config: Config) -> PublishSettings:
+    """The publisher's view of the config (secrets read here, at start, never logged)."""
+    mqtt = config.mqtt
+    tls = mqtt.tls
+    spb = mqtt.sparkplug
+    settings = PublishSettings(
+        host=mqtt.host,
+        port=mqtt.effective_port,
+        tls=tls is not None,
+        tls_ca_file=tls.ca_file if tls else None,
+        tls_cert_file=tls.cert_file if tls else None,
+        tls_key_file=tls.key_file if tls else None,
+        tls_insecure=tls.insecure_skip_verify if tls else False,
+        username=mqtt.username,
+        password=mqtt.read_password(),
+        protocol=mqtt.protocol,
+        keepalive=mqtt.keepalive,
+        formats=frozenset(mqtt.formats),
+        json_prefix=mqtt.json_topics.prefix,
+        state_dir=config.resolved_state_dir,
+    )
+    if mqtt.client_id:
+        settings.client_id = mqtt.client_id
+    elif spb is not None:
+        settings.client_id = f"focas-edge-{spb.group_id}-{spb.edge_node_id}"
+    if spb is not None:
+        settings.group_id = spb.group_id
+        settings.edge_node_id = spb.edge_node_id
+        settings.primary_host_id = spb.primary_host_id
+    return settings
+
+
+class Daemon:
+    def __init__(self, config: Config, config_path: Path | None = None,
+                 session_factory: SessionFactory = default_session,
+                 notifier: SystemdNotifier | None = None) -> None:
+        self.config = config
+        self.config_path = config_path
+        self.session_factory = session_factory
+        self.notifier = notifier or SystemdNotifier()
+        self.state_dir = config.resolved_state_dir
+        self.publisher = Publisher(publish_settings(config))
+        self.pollers: dict[str, MachinePoller] = {}
+        self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._stop = asyncio.Event()
+        self._reload_requested = asyncio.Event()
+        self._started = time.monotonic()
+
+    # ---- lifecycle -----------------------------------------------------------------------------------
+    async def run(self) -> int:
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        self._install_signals()
+        self.publisher.set_node_metrics(self.node_metrics())
+        await self.publisher.start()
+        for machine in self.config.machines:
+            self._start_machine(machine)
+        self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
+        log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
+        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
+        interval = self.notifier.watchdog_interval()
+        if interval:
+            background.append(asyncio.create_task(self._watchdog_loop(interval), name="watchdog"))
+        try:
+            while not self._stop.is_set():
+                reload_wait = asyncio.create_task(self._reload_requested.wait())
+                stop_wait = asyncio.create_task(self._stop.wait())
+                await asyncio.wait({reload_wait, stop_wait}, return_when=asyncio.FIRST_COMPLETED)
+                reload_wait.cancel()
+                stop_wait.cancel()
+                if self._reload_requested.is_set() and not self._stop.is_set():
+                    self._reload_requested.clear()
+                    await self.reload()
+        finally:
+            self.notifier.stopping()
+            for task in background:
+                task.cancel()
+            await asyncio.gather(*background, return_exceptions=True)
+            await self.shutdown()
+        return 0
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def request_reload(self) -> None:
+        self._reload_requested.set()
+
+    async def shutdown(self) -> None:
+        """Stop polling, DDEATHs + NDEATH + DISCONNECT, then close PDUs to every CNC."""
+        tasks = list(self._tasks.values())
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        with contextlib.suppress(Exception):
+            await self.publisher.stop()
+        await asyncio.gather(*(p.close() for p in self.pollers.values()), return_exceptions=True)
+        self._tasks.clear()
+        log.info("stopped")
+
+    def _install_signals(self) -> None:
+        loop = asyncio.get_running_loop()
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(signal.SIGTERM, self.request_stop)
+            loop.add_signal_handler(signal.SIGINT, self.request_stop)
+            loop.add_signal_handler(signal.SIGHUP, self.request_reload)
+
+    # ---- machines ------------------------------------------------------------------------------------
+    def _start_machine(self, machine: MachineConfig) -> None:
+        poller = MachinePoller(machine, self.config.alarms_for(machine), self.publisher, self.state_dir,
+                               self.session_factory)
+        self.pollers[machine.id] = poller
+        task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
+        task.add_done_callback(self._poller_done)
+        self._tasks[machine.id] = task
+
+    def _poller_done(self, task: asyncio.Task[None]) -> None:
+        if task.cancelled():
+            return
+        error = task.exception()
+        if error is not None:
+            log.error("poll loop ended task=%s error=%r", task.get_name(), error)
+
+    async def _stop_machine(self, machine_id: str) -> None:
+        task = self._tasks.pop(machine_id, None)
+        poller = self.pollers.pop(machine_id, None)
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+        if poller is not None:
+            if poller.online:
+                with contextlib.suppress(Exception):
+                    await self.publisher.device_offline(machine_id)
+            await poller.close()
+
+    async def reload(self) -> None:
+        """Apply a changed config file without dropping the broker session."""
+        if self.config_path is None:
+            return
+        self.notifier.reloading()
+        try:
+            new = load_config(self.config_path)
+        except ConfigError as exc:
+            log.error("reload refused, keeping the running config: %s", exc)
+            self.notifier.ready("reload refused: bad config")
+            return
+        if new.mqtt != self.config.mqtt:
+            log.warning("reload: mqtt settings changed; they take effect at the next restart")
+        old = {m.id: m for m in self.config.machines}
+        fresh = {m.id: m for m in new.machines}
+        changed = [i for i in old if i in fresh and (old[i] != fresh[i] or
+                                                     self.config.alarms_for(old[i]) != new.alarms_for(fresh[i]))]
+        removed = [i for i in old if i not in fresh]
+        added = [i for i in fresh if i not in old]
+        self.config = new
+        for machine_id in removed + changed:
+            await self._stop_machine(machine_id)
+        for machine_id in changed + added:
+            self._start_machine(fresh[machine_id])
+        log.info("reloaded added=%s removed=%s changed=%s", added, removed, changed)
+        self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
+
+    # ---- health --------------------------------------------------------------------------------------
+    def healthy(self, stale_after_s: float | None = None) -> bool:
+        """Every poll loop alive and making progress (ticks, or connect attempts while a CNC is away)."""
+        now = time.monotonic()
+        for machine_id, task in self._tasks.items():
+            if task.done():
+                return False
+            poller = self.pollers[machine_id]
+            limit = stale_after_s or _stale_limit(poller.machine)
+            if now - poller.last_progress > limit:
+                return False
+        return True
+
+    async def _watchdog_loop(self, interval: float) -> None:
+        while True:
+            if self.healthy():
+                self.notifier.watchdog()
+            else:
+                log.error("watchdog withheld: a poll loop is not making progress")
+            await asyncio.sleep(interval)
+
+    def node_metrics(self) -> list[Sample]:
+        now = int(time.time() * 1000)
+        connected = sum(1 for p in self.pollers.values() if p.online)
+        overruns = sum(p.stats.overruns for p in self.pollers.values())
+        counters = self.publisher.counters
+        published = int(sum(v for k, v in counters.items() if k.startswith("published")))
+        values: list[tuple[str, object, MetricType]] = [
+            ("Properties/Software Version", __version__, MetricType.STRING),
+            ("Properties/OS", f"{platform.system()} {platform.machine()}", MetricType.STRING),
+            ("Gateway/Machines", len(self.pollers), MetricType.INT32),
+            ("Gateway/MachinesConnected", connected, MetricType.INT32),
+            ("Gateway/PollOverruns", overruns, MetricType.INT64),
+            ("Gateway/MessagesPublished", published, MetricType.INT64),
+            ("Gateway/UptimeSeconds", int(time.monotonic() - self._started), MetricType.INT64),
+        ]
+        return [Sample(name, value, kind, now) for name, value, kind in values]
+
+    async def _node_metrics_loop(self) -> None:
+        while True:
+            await asyncio.sleep(NODE_METRICS_PERIOD_S)
+            self.publisher.set_node_metrics(self.node_metrics())
+
+
+def _stale_limit(machine: MachineConfig) -> float:
+    timeouts = machine.timeouts
+    periods = machine.poll.periods
+    return 3 * (timeouts.request_s + timeouts.connect_s + timeouts.backoff_max_s) + max(
+        periods.status, periods.macros, periods.pmc)
+
+
+def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = None) -> int:
+    config = load_config(config_path)
+    for warning in config.warnings:
+        log.warning("config: %s", warning)
+
+    async def main() -> int:
+        daemon = Daemon(config, config_path)
+        if configure is not None:
+            configure(daemon)
+        return await daemon.run()
+
+    return asyncio.run(main())

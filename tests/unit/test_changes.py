@@ -1,0 +1,92 @@
+from __future__ import annotations
+
+import math
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from edge.collect.changes import ChangeDetector, values_differ
+from edge.samples import MetricType, Quality, Sample
+
+
+def s(name: str, value: object, quality: Quality = Quality.GOOD, t: int = 0,
+      kind: MetricType = MetricType.DOUBLE) -> Sample:
+    return Sample(name, value, kind, t, quality)
+
+
+def test_first_value_is_reported_then_only_changes() -> None:
+    detector = ChangeDetector()
+    assert detector.filter([s("a", 1.0), s("b", 2.0)]) == [s("a", 1.0), s("b", 2.0)]
+    assert detector.filter([s("a", 1.0, t=5), s("b", 2.5, t=5)]) == [s("b", 2.5, t=5)]
+
+
+def test_deadband_is_measured_from_the_last_reported_value() -> None:
+    detector = ChangeDetector({"x": 0.5})
+    assert detector.offer(s("x", 10.0))
+    assert not detector.offer(s("x", 10.3))
+    assert not detector.offer(s("x", 10.5))  # exactly the deadband: not beyond it
+    assert detector.offer(s("x", 10.6))  # drift adds up against 10.0
+    assert not detector.offer(s("x", 10.2))
+    assert detector.offer(s("x", 10.0))
+
+
+def test_set_deadband_rejects_negative() -> None:
+    detector = ChangeDetector()
+    try:
+        detector.set_deadband("x", -1)
+    except ValueError as exc:
+        assert "x" in str(exc)
+    else:
+        raise AssertionError("negative deadband accepted")
+
+
+def test_reset_gives_full_state_again() -> None:
+    detector = ChangeDetector()
+    detector.filter([s("a", 1.0), s("b", "text", kind=MetricType.STRING)])
+    assert detector.filter([s("a", 1.0), s("b", "text", kind=MetricType.STRING)]) == []
+    detector.reset()
+    assert len(detector.filter([s("a", 1.0), s("b", "text", kind=MetricType.STRING)])) == 2
+
+
+def test_quality_change_is_a_change() -> None:
+    detector = ChangeDetector({"a": 100.0})
+    detector.offer(s("a", 1.0))
+    assert detector.offer(s("a", 1.0, Quality.BAD))
+    assert not detector.offer(s("a", 1.0, Quality.BAD))
+    assert detector.offer(s("a", 1.0, Quality.GOOD))
+
+
+def test_nan_and_none() -> None:
+    detector = ChangeDetector({"a": 1.0})
+    assert detector.offer(s("a", math.nan))
+    assert not detector.offer(s("a", math.nan))
+    assert detector.offer(s("a", 0.0))
+    assert detector.offer(s("a", None))
+    assert not detector.offer(s("a", None))
+    assert detector.offer(s("a", 0.0))
+
+
+def test_booleans_and_strings_ignore_deadband() -> None:
+    assert values_differ(True, False, 10.0)
+    assert not values_differ(True, True, 10.0)
+    assert values_differ("a", "b", 10.0)
+    assert values_differ(1, True)  # a type change is a change
+    assert values_differ([1, 2], [1, 3])
+
+
+def test_last_reported_is_the_published_picture() -> None:
+    detector = ChangeDetector({"a": 1.0})
+    detector.offer(s("a", 1.0, t=1))
+    detector.offer(s("a", 1.5, t=2))
+    assert detector.last_reported()["a"] == s("a", 1.0, t=1)
+
+
+@given(st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=50), st.floats(0, 100))
+def test_reported_values_track_within_deadband(values: list[float], deadband: float) -> None:
+    """Whatever the sequence, the last reported value is never more than the deadband off the latest."""
+    detector = ChangeDetector({"x": deadband})
+    for value in values:
+        detector.offer(s("x", value))
+        reported = detector.last_reported()["x"].value
+        assert isinstance(reported, float)
+        assert abs(reported - value) <= deadband

@@ -1,0 +1,123 @@
+from __future__ import annotations
+
+import random
+from datetime import UTC, datetime, timedelta
+
+import pytest
+
+from edge.collect.clock import ClockTracker, ClockTransition, cnc_to_utc_seconds
+from zoneinfo import ZoneInfo
+
+T0 = 1_790_000_000.0  # gateway wall time at monotonic 0 (an arbitrary 2026 moment)
+
+
+class FakeCnc:
+    """A CNC whose clock runs `offset` seconds from the gateway, shown to the second in `zone`."""
+
+    def __init__(self, offset: float, zone: str = "UTC") -> None:
+        self.offset = offset
+        self.zone = ZoneInfo(zone)
+
+    def wall(self, gateway_wall: float) -> datetime:
+        utc = datetime.fromtimestamp(int(gateway_wall + self.offset), UTC)
+        return utc.astimezone(self.zone).replace(tzinfo=None)
+
+
+def run(tracker: ClockTracker, cnc: FakeCnc, ticks: int, period: float = 0.25, start: float = 0.0,
+        jitter: float = 0.0, seed: int = 1) -> float:
+    rng = random.Random(seed)
+    mono = start
+    for _ in range(ticks):
+        mono += period + rng.uniform(0, jitter)
+        tracker.observe(cnc.wall(T0 + mono), mono, T0 + mono)
+    return mono
+
+
+def test_cnc_37_seconds_ahead_gives_cnc_time_within_50_ms() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    mono = run(tracker, FakeCnc(37.3), ticks=12, period=0.25, jitter=0.05)
+    assert not tracker.use_gateway_time and tracker.reason is None
+    stamp = tracker.source_time_ms(mono, T0 + mono)
+    assert abs(stamp - (T0 + mono + 37.3) * 1000) < 50
+    assert tracker.skew_s == pytest.approx(37.3, abs=0.05)
+    assert tracker.uncertainty_s is not None and tracker.uncertainty_s < 0.2
+
+
+def test_time_zone_is_applied() -> None:
+    tracker = ClockTracker("America/Chicago", max_skew_s=60)
+    mono = run(tracker, FakeCnc(5.0, "America/Chicago"), ticks=20, jitter=0.03)
+    assert abs(tracker.source_time_ms(mono, T0 + mono) - (T0 + mono + 5.0) * 1000) < 60
+    naive = datetime(2026, 7, 1, 12, 0, 0)
+    assert cnc_to_utc_seconds(naive, ZoneInfo("America/Chicago")) == \
+        datetime(2026, 7, 1, 17, 0, 0, tzinfo=UTC).timestamp()
+
+
+def test_skew_beyond_limit_uses_gateway_time_then_recovers() -> None:
+    cnc = FakeCnc(3600.0)  # a wrong time zone, say
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    assert tracker.use_gateway_time and tracker.reason == "no CNC clock reading yet"
+    mono = 0.25
+    assert tracker.observe(cnc.wall(T0 + mono), mono, T0 + mono) is None  # was gateway, still gateway
+    mono = run(tracker, cnc, ticks=8, start=mono)
+    assert tracker.use_gateway_time
+    assert tracker.reason is not None and "ahead of the gateway" in tracker.reason and "60" in tracker.reason
+    assert tracker.source_time_ms(mono, T0 + mono) == round((T0 + mono) * 1000)
+
+    cnc.offset = 2.0  # someone fixed the clock
+    transitions = []
+    for _ in range(8):
+        mono += 0.25
+        transitions.append(tracker.observe(cnc.wall(T0 + mono), mono, T0 + mono))
+    assert ClockTransition.TO_CNC in transitions
+    assert not tracker.use_gateway_time and tracker.reason is None
+    assert tracker.restarts >= 1
+    assert abs(tracker.source_time_ms(mono, T0 + mono) - (T0 + mono + 2.0) * 1000) < 260
+
+    cnc.offset = -120.0
+    mono += 0.25
+    assert tracker.observe(cnc.wall(T0 + mono), mono, T0 + mono) is ClockTransition.TO_GATEWAY
+    assert tracker.reason is not None and "behind" in tracker.reason
+
+
+def test_gateway_wall_step_does_not_move_cnc_time() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    cnc = FakeCnc(10.0)
+    mono = run(tracker, cnc, ticks=20, jitter=0.05)
+    before = tracker.source_time_ms(mono, T0 + mono)
+    # the gateway's NTP steps its wall clock 5 s; monotonic time and the CNC do not care
+    assert tracker.source_time_ms(mono, T0 + mono + 5) == before
+
+
+def test_round_trip_margin_keeps_noisy_readings_consistent() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    cnc = FakeCnc(0.4)
+    rng = random.Random(7)
+    mono = 0.0
+    for _ in range(200):
+        mono += 0.25 + rng.uniform(0, 0.02)
+        sampled_at = mono + rng.uniform(-0.01, 0.01)  # the CNC read its clock inside the request
+        tracker.observe(cnc.wall(T0 + sampled_at), mono, T0 + mono, half_rtt_s=0.01)
+    assert tracker.restarts == 0
+    assert abs(tracker.source_time_ms(mono, T0 + mono) - (T0 + mono + 0.4) * 1000) < 50
+
+
+def test_reset_forgets() -> None:
+    tracker = ClockTracker(ZoneInfo("UTC"), max_skew_s=60)
+    run(tracker, FakeCnc(1.0), ticks=5)
+    tracker.reset()
+    assert tracker.offset_s is None and tracker.skew_s is None and tracker.use_gateway_time
+
+
+def test_window_expires_old_readings() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=600, window_s=10)
+    cnc = FakeCnc(0.0)
+    mono = run(tracker, cnc, ticks=100, period=0.25, jitter=0.05)
+    assert mono > 20
+    cnc.offset = 0.5  # a slow drift that the old readings would contradict
+    mono = run(tracker, cnc, ticks=100, start=mono, jitter=0.05)
+    assert abs(tracker.source_time_ms(mono, T0 + mono) - (T0 + mono + 0.5) * 1000) < 60
+
+
+def test_offset_of_a_naive_vs_aware_time() -> None:
+    aware = datetime(2026, 1, 1, tzinfo=UTC) + timedelta(hours=1)
+    assert cnc_to_utc_seconds(aware, ZoneInfo("Asia/Tokyo")) == aware.timestamp()
