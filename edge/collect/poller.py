@@ -21,12 +21,12 @@ from datetime import datetime
 from pathlib import Path
 from typing import Protocol
 
-from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_exponential_jitter
+from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.changes import ChangeDetector
-from edge.collect.clock import ClockTracker, ClockTransition
+from edge.collect.clock import ClockTracker
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.connect import open_session
@@ -116,6 +116,7 @@ class MachinePoller:
         self._history = AlarmHistoryDedup(history_store)
         self._dropped: set[str] = set()
         self._plan: pl.MachinePlan | None = None
+        self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
 
     @property
     def machine_id(self) -> str:
@@ -152,7 +153,7 @@ class MachinePoller:
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(FocasError),
-            wait=wait_exponential_jitter(initial=timeouts.backoff_initial_s, max=timeouts.backoff_max_s),
+            wait=wait_random_exponential(multiplier=timeouts.backoff_initial_s, max=timeouts.backoff_max_s),
             before_sleep=before_sleep,
             reraise=True,
         )
@@ -267,12 +268,14 @@ class MachinePoller:
 
     def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> int:
         if isinstance(result, datetime):
-            transition = self.clock.observe(result, mid_mono, mid_wall, half_rtt)
-            if transition is ClockTransition.TO_GATEWAY:
-                log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
-            elif transition is ClockTransition.TO_CNC:
-                log.info("using CNC time again machine=%s skew=%.3fs", self.machine_id,
-                         self.clock.skew_s or 0.0)
+            self.clock.observe(result, mid_mono, mid_wall, half_rtt)
+            using_gateway = self.clock.use_gateway_time
+            if using_gateway != self._clock_mode_logged:
+                if using_gateway:
+                    log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
+                else:
+                    log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
+                self._clock_mode_logged = using_gateway
         elif isinstance(result, FocasError):
             self.stats.count_error(result)
         return self.clock.source_time_ms(mid_mono, mid_wall)

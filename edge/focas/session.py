@@ -20,7 +20,7 @@ from tenacity import (
     RetryCallState,
     retry_if_exception_type,
     stop_after_delay,
-    wait_exponential_jitter,
+    wait_random_exponential,
 )
 
 from edge.focas import items as it
@@ -133,7 +133,7 @@ class CncSession(abc.ABC):
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(FocasError),
-            wait=wait_exponential_jitter(initial=self.backoff_initial, max=self.backoff_max),
+            wait=wait_random_exponential(multiplier=self.backoff_initial, max=self.backoff_max),
             stop=stop_after_delay(deadline) if deadline is not None else (lambda _state: False),
             before_sleep=_log,
             reraise=True,

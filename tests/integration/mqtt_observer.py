@@ -36,6 +36,7 @@ class Observer:
 
     def __init__(self, broker: Mosquitto, topics: tuple[str, ...] = ("spBv1.0/#", "focas/#")) -> None:
         self.topics = topics
+        self.broker = broker
         self.messages: list[Received] = []
         self._lock = threading.Lock()
         self._subscribed = threading.Event()

@@ -12,6 +12,7 @@ import sys
 import urllib.request
 from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -19,7 +20,7 @@ from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.errors import EW_FUNC, FocasError, LengthError, OutOfRange
-from edge.focas.frame import FrameDecoder, decode_response_body, encode_open_request, encode_request
+from edge.focas.frame import Frame, FrameDecoder, decode_response_body, encode_open_request, encode_request
 from edge.focas.model import PmcType
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.profiles import PROFILES
@@ -83,13 +84,13 @@ def expected_values(fleet: Fleet) -> list[object]:
     ]
 
 
-def same_records(got: list[object], want: list[object]) -> bool:
+def same_records(got: Any, want: Any) -> bool:
     """Records match when number, axis, type and the state's values agree (the wire pads to max_axis)."""
     if len(got) != len(want):
         return False
     for a, b in zip(got, want, strict=True):
-        n = len(b.values)  # type: ignore[attr-defined]
-        if (a.number, a.axis, a.type, a.values[:n]) != (b.number, b.axis, b.type, b.values):  # type: ignore[attr-defined]
+        n = len(b.values)
+        if (a.number, a.axis, a.type, a.values[:n]) != (b.number, b.axis, b.type, b.values):
             return False
     return True
 
@@ -142,18 +143,19 @@ async def test_the_other_record_form_answers_ew_func(sim: tuple[Fleet, FakeClock
     try:
         decoder = FrameDecoder()
 
-        async def exchange(data: bytes) -> list[object]:
+        async def exchange(data: bytes) -> list[Frame]:
             writer.write(data)
-            while not (frames := decoder.feed(await asyncio.wait_for(reader.read(65536), 5))):
-                pass
+            frames: list[Frame] = []
+            while not frames:
+                frames = decoder.feed(await asyncio.wait_for(reader.read(65536), 5))
             return frames
 
         await exchange(encode_open_request())
         requests = [f.request(6711, 6711, 0) for f in (fn.READ_PARAMS_4, fn.READ_PARAMS_8)]
         requests += [f.request(980, 980, 1) for f in (fn.READ_DIAG_4, fn.READ_DIAG_8)]
         (frame,) = await exchange(encode_request(requests))
-        assert frame.version == fleet[0].state.profile.response_version  # type: ignore[attr-defined]
-        answers = decode_response_body(frame.body)  # type: ignore[attr-defined]
+        assert frame.version == fleet[0].state.profile.response_version
+        answers = decode_response_body(frame.body)
         rcs = [a.rc for a in answers]
         assert rcs == ([EW_FUNC, 0, EW_FUNC, 0] if wide else [0, EW_FUNC, 0, EW_FUNC])
     finally:
@@ -190,7 +192,7 @@ async def test_writes_reach_the_machine(sim: tuple[Fleet, FakeClock]) -> None:
 async def test_the_machine_moves_between_reads(sim: tuple[Fleet, FakeClock]) -> None:
     fleet, clock = sim
     async with client(fleet) as cnc:
-        parts = (await cnc.read_params(6711))[0].value
+        parts = int((await cnc.read_params(6711))[0].value or 0)
         first = await cnc.batch([it.ReadPositions("absolute"), it.ReadStatus()])
         clock.now += 0.7
         second = await cnc.batch([it.ReadPositions("absolute"), it.ReadStatus()])
@@ -209,10 +211,15 @@ def test_cli_sim_runs_until_sigterm(tmp_path: Path) -> None:
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=Path(__file__).parents[2],
         env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        assert proc.stdout is not None
+        stdout = proc.stdout
+        assert stdout is not None
         lines: list[str] = []
-        wait_for(lambda: lines.append(proc.stdout.readline()) or lines[-1].startswith("ready") or
-                 proc.poll() is not None, timeout=20, message="the simulator to print 'ready'")
+
+        def ready() -> bool:
+            lines.append(stdout.readline())
+            return lines[-1].startswith("ready") or proc.poll() is not None
+
+        wait_for(ready, timeout=20, message="the simulator to print 'ready'")
         text = "".join(lines)
         ports = [int(p) for p in re.findall(r"focas 127\.0\.0\.1:(\d+)", text)]
         admin = re.search(r"admin\s+(http://\S+)", text)

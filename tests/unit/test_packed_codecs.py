@@ -178,7 +178,7 @@ def test_history_zero_entries() -> None:
     [(2026, 0, 1, 0, 0, 0), (2026, 13, 1, 0, 0, 0), (2026, 2, 30, 0, 0, 0), (2026, 1, 1, 24, 0, 0),
      (2026, 1, 1, 0, 60, 0), (2026, 1, 1, 0, 0, 60), (0, 1, 1, 0, 0, 0), (-5, 1, 1, 0, 0, 0)],
 )
-def test_history_malformed_timestamp_skips_that_entry_only(bad_time: tuple[int, ...]) -> None:
+def test_history_malformed_timestamp_skips_that_entry_only(bad_time: tuple[int, int, int, int, int, int]) -> None:
     wire = (h("0300")
             + entry_bytes(2026, 3, 1, 8, 0, 0, 1, 2, 100, b"FIRST")
             + entry_bytes(*bad_time, 0, 2, 200, b"BAD")

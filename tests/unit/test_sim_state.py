@@ -182,9 +182,9 @@ def test_pmc_typed_reads() -> None:
 def test_pmc_signals_follow_the_machine() -> None:
     state, clock = machine()
     clock.tick(3.0)
-    assert state.read_pmc("F", 0, 0)[0] & 0b0010_0000  # STL while cutting
+    assert state.read_pmc_bytes("F", 0, 0)[0] & 0b0010_0000  # STL while cutting
     clock.tick(9.0)
-    assert not state.read_pmc("F", 0, 0)[0] & 0b0010_0000
+    assert not state.read_pmc_bytes("F", 0, 0)[0] & 0b0010_0000
 
 
 # ---- parameters and diagnoses -----------------------------------------------------------------------------

@@ -1,0 +1,207 @@
+"""`focas-edge read` / `write` against the simulated CNC over real TCP (native and packed transports)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from edge.cli import main
+from edge.sim.native_server import NativeServer
+from edge.sim.packed_server import PackedServer, start_packed_server
+from edge.sim.state import MachineState
+from tests.helpers import free_port
+
+pytestmark = pytest.mark.integration
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class Sim:
+    state: MachineState
+    native: NativeServer
+    packed: PackedServer
+    loop: asyncio.AbstractEventLoop
+
+    @property
+    def address(self) -> str:
+        return f"127.0.0.1:{self.native.port}"
+
+
+@pytest.fixture(scope="module")
+def sim() -> Iterator[Sim]:
+    """One simulated 30i serving both transports from an event loop in its own thread."""
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="sim-loop", daemon=True)
+    thread.start()
+
+    def call(coro: Any) -> Any:
+        return asyncio.run_coroutine_threadsafe(coro, loop).result(timeout=10)
+
+    state = MachineState("30i", name="cli-test")
+    native = NativeServer(state)
+    call(native.start())
+    packed = call(start_packed_server(state))
+    try:
+        yield Sim(state, native, packed, loop)
+    finally:
+        call(native.close())
+        call(packed.close())
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout=10)
+        loop.close()
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(["--log-level", "WARNING", *argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def json_lines(out: str) -> dict[str, dict[str, Any]]:
+    rows = [json.loads(line) for line in out.splitlines() if line.strip()]
+    assert all(set(row) == {"item", "value", "error"} for row in rows)
+    return {row["item"]: row for row in rows}
+
+
+ALL_ITEMS = ("sysinfo", "status", "alarms", "program", "positions", "clock", "macro:500-505", "param:6711",
+             "param:1815/1", "diag:980-981/1", "pmc:D2204.word", "pmc:R100-R103")
+
+
+def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    requests_before = sim.native.stats.describe()
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, *ALL_ITEMS)
+    assert code == 0, err
+    rows = json_lines(out)
+    assert list(rows) == list(ALL_ITEMS)
+    assert all(row["error"] is None for row in rows.values())
+    assert rows["sysinfo"]["value"]["cnc_type"].strip() == "30"
+    macros = rows["macro:500-505"]["value"]
+    assert list(macros) == [f"#{n}" for n in range(500, 506)]
+    assert macros["#500"] == sim.state.read_macro(500)
+    assert rows["param:6711"]["value"] == sim.state.part_count() or isinstance(rows["param:6711"]["value"], int)
+    assert rows["pmc:D2204.word"]["value"] == sim.state.read_pmc("D", 2204, 2205, 1)[0]
+    assert list(rows["pmc:R100-R103"]["value"]) == ["R100", "R101", "R102", "R103"]
+    assert set(rows["positions"]["value"]) == set(sim.state.axis_names())
+    assert set(rows["diag:980-981/1"]["value"]) == {"980", "981"}
+    assert rows["clock"]["value"][:4].isdigit()
+    assert requests_before is not None
+
+
+def test_read_table_is_readable(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run_cli(capsys, "read", sim.address, "macro:500-501", "status")
+    assert code == 0
+    lines = out.splitlines()
+    assert lines[0].split()[:2] == ["macro:500-501", "#500"]
+    assert lines[1].split()[0] == "#501"
+    assert any(line.startswith("status") for line in lines)
+
+
+def test_failed_item_fails_alone_and_names_the_ew_code(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, "macro:500", "macro:99999", "pmc:R100")
+    assert code == 1
+    rows = json_lines(out)
+    assert rows["macro:500"]["error"] is None and rows["pmc:R100"]["error"] is None
+    error = rows["macro:99999"]["error"]
+    assert error["code"] == "EW_NUMBER" and error["ew"] == 3
+    assert "macro:99999" in err and "EW_NUMBER" in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [("read", "127.0.0.1:1", "macro:abc"), ("read", "unix:/tmp/x.sock", "status"),
+     ("write", "127.0.0.1:1", "macro:500"), ("write", "127.0.0.1:1", "macro:500=abc"),
+     ("write", "127.0.0.1:1", "pmc:R100=256"), ("write", "127.0.0.1:1", "diag:980=1"),
+     ("write", "127.0.0.1:1", "pmc:R100-R101=1"), ("read", "127.0.0.1:1")],
+)
+def test_bad_usage_exits_2_without_connecting(argv: tuple[str, ...], capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        raise SystemExit(main(list(argv)))
+    assert info.value.code == 2
+    assert capsys.readouterr().err
+
+
+def test_unreachable_cnc_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    port = free_port()
+    code, out, err = run_cli(capsys, "read", "--json", "--timeout", "2", f"127.0.0.1:{port}", "status", "clock")
+    assert code == 1
+    rows = json_lines(out)
+    assert all(row["error"] is not None for row in rows.values())
+    assert "status" in err
+
+
+def test_write_macro_pmc_bit_and_typed(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    sim.state.write_pmc("R", 120, bytes([0b0000_0001]), protocol="admin")
+    code, out, err = run_cli(capsys, "write", sim.address, "macro:510=1.25", "macro:511=-0.001",
+                             "pmc:R121=0x41", "pmc:R120.3=1", "pmc:D2300.word=600", "pmc:R122-R123=7,8")
+    assert code == 0, err
+    assert sim.state.read_macro(510) == 1.25 and sim.state.read_macro(511) == -0.001
+    assert sim.state.read_pmc_bytes("R", 120, 123) == bytes([0b0000_1001, 0x41, 7, 8])
+    assert sim.state.read_pmc("D", 2300, 2301, 1) == [600]
+    assert "pmc:R120.3=1  ok, reads back 1" in out
+    targets = [w.target for w in sim.state.writes() if w.protocol == "native"]
+    assert "macro:510" in targets and "pmc:R121" in targets
+
+
+def test_write_pmc_range_over_32_bytes_is_chunked(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    values = list(range(1, 41))
+    code, _, err = run_cli(capsys, "write", sim.address, f"pmc:R150-R189={','.join(map(str, values))}")
+    assert code == 0, err
+    assert list(sim.state.read_pmc_bytes("R", 150, 189)) == values
+
+
+def test_write_stops_at_first_failure(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    before = len(sim.state.writes())
+    code, out, err = run_cli(capsys, "write", "--json", sim.address, "macro:99999=1", "macro:512=5")
+    assert code == 1
+    rows = json_lines(out)
+    assert list(rows) == ["macro:99999=1"] and rows["macro:99999=1"]["error"]["code"] == "EW_NUMBER"
+    assert "EW_NUMBER" in err
+    assert len(sim.state.writes()) == before
+
+
+def test_parameter_write_needs_the_write_switch(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    packed = sim.packed.address
+    sim.state.set_param_write_enable(False)
+    code, out, err = run_cli(capsys, "write", "--json", "--transport", "packed", packed, "param:6711=5")
+    assert code == 1
+    assert json_lines(out)["param:6711=5"]["error"]["code"] == "EW_PASSWD"
+    sim.state.set_param_write_enable(True)
+    try:
+        code, out, err = run_cli(capsys, "write", "--transport", "packed", packed, "param:6711=5")
+        assert code == 0, err
+        assert sim.state.read_param_value(6711) == 5
+    finally:
+        sim.state.set_param_write_enable(False)
+
+
+def test_native_parameter_write_is_not_supported(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_cli(capsys, "write", sim.address, "param:6711=0")
+    assert code == 1
+    assert "param:6711=0" in err and "not supported" in err
+
+
+def test_packed_transport_reads_too(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", "--transport", "packed", sim.packed.address,
+                             "macro:500", "pmc:R100.3", "param:1815/1")
+    assert code == 0, err
+    rows = json_lines(out)
+    assert rows["macro:500"]["value"] == sim.state.read_macro(500)
+    assert rows["pmc:R100.3"]["value"] in (0, 1)
+
+
+def test_console_entry_point_as_a_subprocess(sim: Sim) -> None:
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run([sys.executable, "-m", "edge", "read", "--json", sim.address, "macro:500"],
+                          capture_output=True, text=True, timeout=60, env=env, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["value"] == sim.state.read_macro(500)

@@ -1,0 +1,133 @@
+"""The MQTT connection layer: TLS with a client certificate, username/password, backoff, clean start."""
+
+from __future__ import annotations
+
+import random
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from edge.publish import PublishSettings, Publisher
+from edge.publish.mqtt import backoff_delay
+from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
+
+pytestmark = pytest.mark.integration
+
+
+def test_backoff_grows_exponentially_to_the_cap_with_jitter() -> None:
+    rng = random.Random(7)
+    for attempt in range(40):
+        ceiling = min(30.0, 0.5 * 2 ** attempt)
+        delays = [backoff_delay(attempt, 0.5, 30.0, rng) for _ in range(50)]
+        assert all(ceiling / 2 <= d <= ceiling for d in delays)
+        assert len(set(delays)) > 1, "jittered"
+    assert backoff_delay(100, 0.5, 30.0, rng) <= 30.0
+
+
+def openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True)
+
+
+@pytest.fixture(scope="module")
+def pki(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A throwaway CA, a server certificate for 127.0.0.1 and a client certificate."""
+    d = tmp_path_factory.mktemp("pki")
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.crt",
+            "-days", "2", "-subj", "/CN=test-ca", cwd=d)
+    for name, extra in (("server", "subjectAltName=IP:127.0.0.1"), ("client", "extendedKeyUsage=clientAuth")):
+        openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out", f"{name}.csr",
+                "-subj", f"/CN={name}", cwd=d)
+        (d / f"{name}.ext").write_text(extra + "\n")
+        openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.crt", "-CAkey", "ca.key", "-CAcreateserial",
+                "-out", f"{name}.crt", "-days", "2", "-extfile", f"{name}.ext", cwd=d)
+    return d
+
+
+def custom_broker(config: str) -> Iterator[Mosquitto]:
+    binary = mosquitto_binary()
+    if binary is None:
+        pytest.skip("mosquitto is not installed")
+    broker = Mosquitto(binary)
+    broker.conf.write_text(f"listener {broker.port} 127.0.0.1\npersistence false\nlog_dest stderr\n{config}")
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.close()
+
+
+@pytest.fixture
+def tls_broker(pki: Path) -> Iterator[Mosquitto]:
+    yield from custom_broker(f"allow_anonymous true\ncafile {pki / 'ca.crt'}\ncertfile {pki / 'server.crt'}\n"
+                             f"keyfile {pki / 'server.key'}\nrequire_certificate true\n")
+
+
+@pytest.fixture
+def auth_broker(tmp_path: Path) -> Iterator[Mosquitto]:
+    pw = tmp_path / "passwd"
+    pw.write_text("")
+    subprocess.run(["mosquitto_passwd", "-b", str(pw), "edge", "s3cret"], check=True, capture_output=True)
+    yield from custom_broker(f"allow_anonymous false\npassword_file {pw}\n")
+
+
+def settings(broker: Mosquitto, state: Path, **kw: object) -> PublishSettings:
+    s = PublishSettings(host=broker.host, port=broker.port, formats=frozenset({"sparkplug", "json"}),
+                        state_dir=state, reconnect_min_s=0.05, reconnect_max_s=0.2, keepalive=5)
+    for key, value in kw.items():
+        setattr(s, key, value)
+    return s
+
+
+@pytest.mark.parametrize("protocol", ["3.1.1", "5"])
+async def test_tls_with_client_certificate(tls_broker: Mosquitto, pki: Path, tmp_path: Path,
+                                           protocol: str) -> None:
+    pub = Publisher(settings(tls_broker, tmp_path, protocol=protocol, tls=True, tls_ca_file=pki / "ca.crt",
+                             tls_cert_file=pki / "client.crt", tls_key_file=pki / "client.key"))
+    await pub.start()
+    try:
+        assert await pub.wait_ready(10), "TLS session with client certificate"
+    finally:
+        await pub.stop()
+
+
+async def test_tls_without_client_certificate_keeps_retrying(tls_broker: Mosquitto, pki: Path,
+                                                             tmp_path: Path) -> None:
+    pub = Publisher(settings(tls_broker, tmp_path, tls=True, tls_ca_file=pki / "ca.crt"))
+    await pub.start()
+    try:
+        assert not await pub.wait_ready(1.0)
+        assert pub.counters["dropped"] == 0 and not pub.connected
+    finally:
+        await pub.stop()
+
+
+async def test_username_password(auth_broker: Mosquitto, tmp_path: Path) -> None:
+    bad = Publisher(settings(auth_broker, tmp_path / "a", username="edge", password="wrong", client_id="bad"))
+    good = Publisher(settings(auth_broker, tmp_path / "b", username="edge", password="s3cret", client_id="ok"))
+    await bad.start()
+    await good.start()
+    try:
+        assert await good.wait_ready(10)
+        assert not bad.connected
+    finally:
+        await bad.stop()
+        await good.stop()
+
+
+@pytest.mark.parametrize("protocol", ["3.1.1", "5"])
+async def test_reconnects_after_broker_restart_with_clean_session(mosquitto: Mosquitto, tmp_path: Path,
+                                                                  protocol: str) -> None:
+    pub = Publisher(settings(mosquitto, tmp_path, protocol=protocol))
+    await pub.start()
+    try:
+        assert await pub.wait_ready()
+        mosquitto.stop()
+        await async_wait_for(lambda: not pub.connected, message="connection loss noticed")
+        await pub.device_data("cnc1", [])  # nothing to send, nothing raised
+        mosquitto.start()
+        await async_wait_for(lambda: pub.ready and pub.counters["sparkplug_connects"] == 2, timeout=15,
+                             message="reconnected")
+    finally:
+        await pub.stop()

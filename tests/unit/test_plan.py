@@ -1,0 +1,150 @@
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from edge.collect.plan import (
+    Group,
+    MachinePlan,
+    PlannedRead,
+    Schedule,
+    StaticInfo,
+    axis_unit,
+    metric_values,
+)
+from edge.config import parse_config
+from edge.focas import items as it
+from edge.focas.model import ActiveAlarm, ParamRecord, PmcType, ProgramNumbers, StatInfo, SysInfo
+from edge.samples import MetricType
+
+CONFIG = """
+mqtt: {host: b, formats: [json]}
+alarms: {mode: ActivePlusHistory, history_interval: 5m, history_depth: 50}
+machines:
+  - id: m1
+    host: h
+    poll:
+      periods: {status: 250ms, macros: 1s, pmc: 2s, params: 60s, diags: 30s}
+      positions: [absolute, distance]
+      macros: ["500-502", {first: 600, name: Tool/Offset, deadband: 0.1}]
+      pmc: [{area: D, range: D2204-D2207, data_type: word}]
+      params: [{number: 1815, axis: 1}]
+      diags: [980]
+"""
+STATIC = StaticInfo(axis_names=("X", "Y", "B"), spindle_names=("S1", "S2"))
+
+
+@pytest.fixture
+def plan() -> MachinePlan:
+    config = parse_config(CONFIG, "t", {})
+    return MachinePlan.build(config.machines[0], config.alarms, STATIC)
+
+
+def names(reads: list[PlannedRead]) -> list[str]:
+    return [spec.name for read in reads for spec in read.metrics]
+
+
+def test_groups_hold_the_configured_reads(plan: MachinePlan) -> None:
+    macros = plan.reads_for([Group.MACROS])
+    assert [r.item for r in macros] == [it.ReadMacros(500, 502), it.ReadMacros(600, 600)]
+    assert names(macros) == ["Macro/500", "Macro/501", "Macro/502", "Tool/Offset"]
+    (pmc,) = plan.reads_for([Group.PMC])
+    assert pmc.item == it.ReadPmc("D", 2204, 2207, PmcType.WORD)
+    assert names([pmc]) == ["PMC/D2204", "PMC/D2206"] and pmc.metrics[0].type is MetricType.INT16
+    assert [r.item for r in plan.reads_for([Group.PARAMS, Group.DIAGS])] == [
+        it.ReadParams(1815, 1815, 1), it.ReadDiag(980, 980, 0)]
+    assert [r.item for r in plan.reads_for([Group.ALARM_HISTORY])] == [it.ReadAlarmHistory(50)]
+    assert {r.item.operation for r in plan.reads_for([Group.STATIC])} == {
+        "ReadSysInfo", "ReadAxisNames", "ReadSpindleNames"}
+
+
+def test_status_metric_names_and_units(plan: MachinePlan) -> None:
+    status = names(plan.reads_for([Group.STATUS]))
+    for name in ("Status/Run", "Status/Mode", "Program/Number", "Spindle/1/Speed", "Spindle/2/Load",
+                 "Axis/X/Absolute", "Axis/B/DistanceToGo", "Counters/Parts", "Feed/Actual"):
+        assert name in status
+    specs = {s.name: s for s in plan.metrics()}
+    assert specs["Axis/X/Absolute"].unit == "mm" and specs["Axis/B/Absolute"].unit == "deg"
+    assert specs["Spindle/1/Speed"].unit == "rpm"
+    assert specs["Macro/500"].writable and not specs["Status/Run"].writable
+    for name in ("Alarm/Active", "Alarm/Event", "Alarm/History", "Clock/Skew", "Device/Model"):
+        assert name in specs
+    assert "Device/AxisNames" not in specs
+    lowered = [n.lower() for n in specs]
+    assert len(lowered) == len(set(lowered))
+    assert axis_unit("a1") == "deg"
+
+
+def test_deadbands(plan: MachinePlan) -> None:
+    assert plan.deadbands() == {"Tool/Offset": 0.1}
+
+
+def test_history_read_only_in_history_mode() -> None:
+    config = parse_config(CONFIG.replace("mode: ActivePlusHistory", "mode: ActiveOnly"), "t", {})
+    plan = MachinePlan.build(config.machines[0], config.alarms)
+    assert plan.reads_for([Group.ALARM_HISTORY]) == []
+    assert "Alarm/History" not in {s.name for s in plan.metrics()}
+
+
+def test_without_drops_an_unsupported_function(plan: MachinePlan) -> None:
+    smaller = plan.without("ReadSequenceNumber")
+    assert "Program/Sequence" not in names(list(smaller.reads))
+    assert len(smaller.reads) == len(plan.reads) - 1
+
+
+def test_metric_values_for_each_kind(plan: MachinePlan) -> None:
+    by_item = {type(r.item).__name__ + str(getattr(r.item, "first", "")): r for r in plan.reads}
+    status = by_item["ReadStatus"]
+    values = dict((s.name, v) for s, v in metric_values(status, StatInfo(1, 3, 1, 0, 1, 0, 0)))
+    assert values["Status/Mode"] == "MEM" and values["Status/Run"] == "START"
+    assert values["Status/Motion"] == "MTN" and values["Status/Emergency"] is True
+    program = by_item["ReadProgramNumber"]
+    assert [v for _, v in metric_values(program, ProgramNumbers(12, 34))] == [12, 34]
+    macros = by_item["ReadMacros500"]
+    assert [v for _, v in metric_values(macros, [1.5, None, 3])] == [1.5, None, 3.0]
+    param = by_item["ReadParams1815"]
+    assert metric_values(param, [ParamRecord(1815, 1, 0, (48,))])[0][1] == 48.0
+    alarms = next(r for r in plan.reads if r.group is Group.ACTIVE_ALARMS)
+    active, count = metric_values(alarms, [ActiveAlarm(1001, 2, 1, "OT")])
+    assert json.loads(str(active[1])) == [{"type": 2, "number": 1001, "axis": 1, "message": "OT"}]
+    assert count[1] == 1
+    sysinfo = by_item["ReadSysInfo"]
+    info = SysInfo(addinfo=0x0202, max_axis=32, cnc_type="30", mt_type=" M", series="G004",
+                   version="21.0", axes="05")
+    assert dict((s.name, v) for s, v in metric_values(sysinfo, info))["Device/Model"] == "30i-BM"
+    unknown_mode = dict((s.name, v) for s, v in metric_values(status, StatInfo(42, 0, 0, 0, 0, 8, 0)))
+    assert unknown_mode["Status/Mode"] == "42" and unknown_mode["Status/Alarm"] == "PMC"
+
+
+def test_schedule_due_groups() -> None:
+    schedule = Schedule({Group.STATUS: 0.25, Group.MACROS: 1.0, Group.PARAMS: 60.0})
+    assert schedule.next_due() is None
+    schedule.start(100.0)
+    assert schedule.due(100.0) == {Group.STATIC, Group.STATUS, Group.MACROS, Group.PARAMS}
+    assert schedule.due(100.1) == set()
+    assert schedule.due(100.25) == {Group.STATUS}
+    assert schedule.due(100.5) == {Group.STATUS}
+    assert schedule.due(100.75) == {Group.STATUS}
+    assert schedule.due(101.0) == {Group.STATUS, Group.MACROS}
+    assert schedule.next_due() == pytest.approx(101.25)
+    assert schedule.skipped == 0
+
+
+def test_schedule_overrun_skips_instead_of_piling_up() -> None:
+    schedule = Schedule({Group.STATUS: 0.25})
+    schedule.start(0.0)
+    schedule.due(0.0)
+    assert schedule.due(1.1) == {Group.STATUS}  # one tick, not four in a row
+    assert schedule.skipped == 3  # 0.25 .. 1.0 overdue; 0.5, 0.75, 1.0 were skipped
+    assert schedule.next_due() == pytest.approx(1.25)
+    assert schedule.due(1.2) == set()
+
+
+def test_static_is_due_once_per_connection() -> None:
+    schedule = Schedule({Group.STATUS: 1.0})
+    schedule.start(0.0)
+    assert Group.STATIC in schedule.due(0.0)
+    assert Group.STATIC not in schedule.due(1.0)
+    schedule.start(5.0)  # reconnected
+    assert Group.STATIC in schedule.due(5.0)
