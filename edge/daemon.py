@@ -18,6 +18,7 @@ from pathlib import Path
 
 from edge import ConfigError, __version__
 from edge.collect.poller import MachinePoller, SessionFactory, default_session
+from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
@@ -72,6 +73,9 @@ class Daemon:
         self.state_dir = config.resolved_state_dir
         self.publisher = Publisher(publish_settings(config))
         self.pollers: dict[str, MachinePoller] = {}
+        self.commands = CommandService(config, self.publisher, self.pollers)
+        self.publisher.on_device_command = self.commands.on_device_command
+        self.publisher.on_json_command = self.commands.on_json_command
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stop = asyncio.Event()
         self._reload_requested = asyncio.Event()
@@ -117,6 +121,7 @@ class Daemon:
 
     async def shutdown(self) -> None:
         """Stop polling, DDEATHs + NDEATH + DISCONNECT, then close PDUs to every CNC."""
+        await self.commands.close()
         tasks = list(self._tasks.values())
         for task in tasks:
             task.cancel()
@@ -182,6 +187,7 @@ class Daemon:
         removed = [i for i in old if i not in fresh]
         added = [i for i in fresh if i not in old]
         self.config = new
+        self.commands.reconfigure(new)
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
         for machine_id in changed + added:

@@ -1,7 +1,7 @@
 """`focas-edge sim`: run a fleet of simulated CNCs until Ctrl-C / SIGTERM.
 
     focas-edge sim --machines 3 --port 8193 --profile 30i,16i,0i-F --admin-port 8190
-    focas-edge sim --scenario config/sim-demo.yaml
+    focas-edge sim --scenario fleet.yaml
 
 Prints one line per machine (name, profile, native port, packed port if any) and the admin URL, then
 "ready". Exit 0 on a clean stop, 1 when a port cannot be bound, 2 on bad usage or a bad scenario.

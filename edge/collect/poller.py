@@ -257,8 +257,8 @@ class MachinePoller:
             if isinstance(read.item, it.ReadAlarmHistory):
                 history = list(result)
                 continue
-            samples.extend(Sample(spec.name, value, spec.type, timestamp,
-                                  Quality.GOOD if value is not None else Quality.BAD)
+            # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
+            samples.extend(Sample(spec.name, value, spec.type, timestamp)
                            for spec, value in pl.metric_values(read, result))
         samples.extend(self._clock_samples(timestamp))
         if alarm_status is not None and self._alarms.status_changed(alarm_status):

@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 NAMESPACE = "spBv1.0"
 _FORBIDDEN_ID_CHARS = frozenset("+/#")
 _by_timestamp = attrgetter("timestamp_ms")
+_name_of = attrgetter("name")
 
 
 def now_ms() -> int:
@@ -77,6 +78,7 @@ class _Device:
     specs: dict[str, MetricSpec]
     aliases: dict[str, int]  # metric name -> alias
     last: dict[str, Sample] = field(default_factory=dict)
+    encoders: dict[str, tuple[int, pl.DataWriter]] = field(default_factory=dict)  # name -> (alias, writer)
     online: bool = False
     not_good: set[str] = field(default_factory=set)  # published last with a non-GOOD quality
 
@@ -221,6 +223,7 @@ class SparkplugNode:
             check_metric_name(s.name)
             node.specs[s.name] = MetricSpec(s.name, s.type)
             node.aliases[s.name] = self._aliases.alias(NODE, s.name)
+            node.encoders[s.name] = (node.aliases[s.name], pl.DATA_WRITERS[s.type])
         if new:
             self._aliases.save()
         changed = [s for s in samples if (old := node.last.get(s.name)) is None or old.value != s.value
@@ -249,6 +252,7 @@ class SparkplugNode:
         self._aliases.save()
         old = self._devices.get(device_id)
         dev = _Device(specs=spec_map, aliases=aliases, online=True)
+        dev.encoders = {n: (aliases[n], pl.DATA_WRITERS[spec.type]) for n, spec in spec_map.items()}
         if old is not None:
             dev.last = {n: s for n, s in old.last.items() if n in spec_map}
         for s in samples:
@@ -266,9 +270,7 @@ class SparkplugNode:
             self._unknown(device_id, "<device>")
             return []
         known = self._known(device_id, dev, samples)
-        last = dev.last
-        for s in known:
-            last[s.name] = s
+        dev.last.update(zip(map(_name_of, known), known, strict=True))
         if not (self.live and dev.online) or not known:
             return []
         return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
@@ -313,10 +315,7 @@ class SparkplugNode:
 
     def _known(self, device_id: str, dev: _Device, samples: Sequence[Sample]) -> Sequence[Sample]:
         specs = dev.specs
-        for s in samples:
-            if s.name not in specs:
-                break
-        else:
+        if all(map(specs.__contains__, map(_name_of, samples))):
             return samples
         known = []
         for s in samples:
@@ -342,22 +341,21 @@ class SparkplugNode:
         ts = self._clock()
         p = Payload(timestamp=ts, seq=self._next_seq())
         metrics = p.metrics
-        aliases = dev.aliases
-        specs = dev.specs
+        encoders = dev.encoders
         not_good = dev.not_good
-        writers = pl.DATA_WRITERS
         good = Quality.GOOD
         for s in sorted(samples, key=_by_timestamp):
             name = s.name
             value = s.value
+            alias, write = encoders[name]
             try:
                 if value is None:
-                    m = metrics.add(alias=aliases[name], timestamp=s.timestamp_ms, is_null=True)
+                    m = metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
                 else:
-                    m = writers[specs[name].type](metrics, aliases[name], s.timestamp_ms, value)
+                    m = write(metrics, alias, s.timestamp_ms, value)
             except (TypeError, ValueError) as exc:
                 self._encode_failed(name, exc)
-                m = metrics.add(alias=aliases[name], timestamp=s.timestamp_ms, is_null=True)
+                m = metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
                 pl.add_quality(m, Quality.BAD)
                 not_good.add(name)
                 continue

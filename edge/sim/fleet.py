@@ -29,6 +29,7 @@ from edge.sim.state import CycleSpec, MachineState
 log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 8193
+DEFAULT_ALARM_EVERY = 3  # a fleet machine raises (and clears) an alarm between parts every 3rd cycle
 
 
 @dataclass
@@ -39,7 +40,7 @@ class MachineSpec:
     profile: str = "30i"
     timezone: str = "UTC"
     clock_offset: float = 0.0
-    cycle: CycleSpec = field(default_factory=CycleSpec)
+    cycle: CycleSpec = field(default_factory=lambda: CycleSpec(alarm_every=DEFAULT_ALARM_EVERY))
     seed: int | None = None
     start_parts: int = 0
     param_write_enabled: bool = False

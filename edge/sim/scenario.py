@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from edge import ConfigError
 from edge.sim.faults import FaultPlan
-from edge.sim.fleet import MachineSpec
+from edge.sim.fleet import DEFAULT_ALARM_EVERY, MachineSpec
 from edge.sim.profiles import get_profile
 from edge.sim.state import CycleSpec
 
@@ -42,7 +42,7 @@ class _CycleModel(BaseModel):
 
     cut_seconds: float = Field(12.0, gt=0)
     idle_seconds: float = Field(4.0, gt=0.6)
-    alarm_every: int = Field(0, ge=0)
+    alarm_every: int = Field(DEFAULT_ALARM_EVERY, ge=0)
     alarm_seconds: float = Field(3.0, gt=0)
     program_number: int = Field(1234, ge=1, le=99999999)
 
@@ -115,7 +115,7 @@ def parse_scenario(data: Any, source: str = "scenario") -> Scenario:
         raise ConfigError(problems, source) from None
     specs: list[MachineSpec] = []
     for entry in model.machines:
-        cycle = CycleSpec(**entry.cycle.model_dump()) if entry.cycle else CycleSpec()
+        cycle = CycleSpec(**(entry.cycle or _CycleModel.model_validate({})).model_dump())
         for copy in range(entry.count):
             name = entry.name if entry.count == 1 else f"{entry.name or entry.profile}-{copy + 1}"
             specs.append(MachineSpec(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 
 import paho.mqtt.client as paho
@@ -12,7 +12,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from edge.publish import CommandSource, PublishSettings, Publisher
+from edge.publish import CommandSource, Publisher, PublishSettings
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.mqtt_observer import Observer
@@ -24,7 +24,7 @@ SPECS = [MetricSpec("Status/Run", MetricType.INT16), MetricSpec("Spindle/1/Speed
 
 
 @pytest.fixture
-def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
+def observer(mosquitto: Mosquitto) -> Iterator[Observer]:
     obs = Observer(mosquitto, topics=("focas/#",))
     yield obs
     obs.close()
@@ -49,7 +49,7 @@ async def make_publisher(mosquitto: Mosquitto, tmp_path: Path) -> AsyncIterator[
 
 
 def doc(m: object) -> dict[str, object]:
-    return json.loads(m.payload)  # type: ignore[attr-defined, no-any-return]
+    return json.loads(m.payload)  # type: ignore[attr-defined]
 
 
 async def test_state_events_online_and_gateway_will(make_publisher: Callable[..., Publisher],
@@ -75,7 +75,7 @@ async def test_state_events_online_and_gateway_will(make_publisher: Callable[...
     assert doc(event)["historical"] is True and doc(event)["name"] == "Alarm/Event"
 
     # Retained: a late subscriber gets the state and the online flag.
-    late = Observer(observer_broker(observer), topics=("focas/cnc1/#",))
+    late = Observer(observer.broker, topics=("focas/cnc1/#",))
     try:
         await late.wait_topic("focas/cnc1/state/Status/Run")
         await late.wait_topic("focas/cnc1/online")
@@ -97,10 +97,6 @@ async def test_state_events_online_and_gateway_will(make_publisher: Callable[...
     await pub.stop()
     await async_wait_for(lambda: observer.on("focas/_gateway/online")[-1].payload == b"offline",
                          message="gateway offline on stop")
-
-
-def observer_broker(observer: Observer) -> Mosquitto:
-    return observer.broker
 
 
 @pytest.mark.parametrize("protocol", ["3.1.1", "5"])

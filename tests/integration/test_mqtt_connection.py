@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import random
 import subprocess
 from collections.abc import Iterator
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from edge.publish import PublishSettings, Publisher
+from edge.publish import Publisher, PublishSettings
 from edge.publish.mqtt import backoff_delay
 from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
 
@@ -50,7 +51,10 @@ def custom_broker(config: str) -> Iterator[Mosquitto]:
     if binary is None:
         pytest.skip("mosquitto is not installed")
     broker = Mosquitto(binary)
-    broker.conf.write_text(f"listener {broker.port} 127.0.0.1\npersistence false\nlog_dest stderr\n{config}")
+    # As root, mosquitto drops to user "mosquitto", which cannot read files under pytest's 0700 tmp dirs.
+    user = "user root\n" if os.geteuid() == 0 else ""
+    broker.conf.write_text(f"listener {broker.port} 127.0.0.1\npersistence false\nlog_dest stderr\n"
+                           f"{user}{config}")
     broker.start()
     try:
         yield broker

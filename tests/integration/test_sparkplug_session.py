@@ -6,12 +6,12 @@ Every check decodes what an independent subscriber received.
 from __future__ import annotations
 
 import json
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 
 import pytest
 
-from edge.publish import CommandSource, PublishSettings, Publisher
+from edge.publish import CommandSource, Publisher, PublishSettings
 from edge.publish import payload as pl
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType, Quality, Sample
@@ -50,7 +50,7 @@ def topic(kind: str, device: str | None = None) -> str:
 
 
 @pytest.fixture
-def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
+def observer(mosquitto: Mosquitto) -> Iterator[Observer]:
     obs = Observer(mosquitto)
     yield obs
     obs.close()

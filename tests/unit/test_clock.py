@@ -2,11 +2,11 @@ from __future__ import annotations
 
 import random
 from datetime import UTC, datetime, timedelta
+from zoneinfo import ZoneInfo
 
 import pytest
 
 from edge.collect.clock import ClockTracker, ClockTransition, cnc_to_utc_seconds
-from zoneinfo import ZoneInfo
 
 T0 = 1_790_000_000.0  # gateway wall time at monotonic 0 (an arbitrary 2026 moment)
 
@@ -121,3 +121,11 @@ def test_window_expires_old_readings() -> None:
 def test_offset_of_a_naive_vs_aware_time() -> None:
     aware = datetime(2026, 1, 1, tzinfo=UTC) + timedelta(hours=1)
     assert cnc_to_utc_seconds(aware, ZoneInfo("Asia/Tokyo")) == aware.timestamp()
+
+
+def test_one_reading_is_at_most_half_a_second_off() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    cnc = FakeCnc(37.9)  # T0 is a whole second, so the CNC is 0.9 s into its second at mono 0
+    tracker.observe(cnc.wall(T0), 0.0, T0)
+    assert tracker.uncertainty_s == pytest.approx(0.5)
+    assert abs(tracker.source_time_ms(0.0, T0) - (T0 + 37.9) * 1000) <= 500

@@ -1,0 +1,140 @@
+"""`make run`: a simulated fleet, a broker, the daemon and a live decoded view, in one process.
+
+The fleet follows the example config (one simulated CNC per configured machine, profiles 30i / 16i /
+0i-F in turn, the first one running a program with alarms coming and going). If no broker answers at
+the configured address, an embedded broker (amqtt) is started there and the demo says so. Ctrl-C stops
+everything cleanly: DDEATHs, NDEATH, close PDUs, broker, simulators.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import socket
+import sys
+from pathlib import Path
+from typing import Any
+
+from edge.config import Config, MachineConfig, load_config
+from edge.daemon import Daemon
+from edge.sim.fleet import Fleet, MachineSpec
+from edge.sim.state import CycleSpec
+from edge.watch import Watcher
+
+log = logging.getLogger("edge.demo")
+
+PROFILES = ("30i", "16i", "0i-F")
+
+
+def broker_answers(host: str, port: int) -> bool:
+    with contextlib.suppress(OSError), socket.create_connection((host, port), timeout=0.5):
+        return True
+    return False
+
+
+async def start_embedded_broker(host: str, port: int) -> Any:
+    """A real MQTT broker in this process (amqtt), for machines without mosquitto."""
+    from amqtt.broker import Broker
+
+    broker = Broker({
+        "listeners": {"default": {"type": "tcp", "bind": f"{host}:{port}"}},
+        "plugins": {"amqtt.plugins.authentication.AnonymousAuthPlugin": {"allow_anonymous": True}},
+    }, loop=asyncio.get_running_loop())
+    await broker.start()
+    return broker
+
+
+def fleet_specs(config: Config) -> list[MachineSpec]:
+    specs = []
+    for index, machine in enumerate(config.machines):
+        cycle = CycleSpec(alarm_every=2, alarm_seconds=6.0) if index == 0 else CycleSpec(
+            cut_seconds=9.0 + 3 * index, idle_seconds=3.0 + index)
+        specs.append(MachineSpec(name=machine.id, profile=PROFILES[index % len(PROFILES)],
+                                 timezone=machine.timezone, cycle=cycle, param_write_enabled=False))
+    return specs
+
+
+async def start_fleet(config: Config) -> tuple[Fleet, Config]:
+    """Simulators on the configured ports (or free ones if those are taken); the config points at them."""
+    first = config.machines[0].port
+    fleet = Fleet(fleet_specs(config), base_port=first, packed_base_port=0)
+    try:
+        await fleet.start()
+    except OSError as exc:
+        await fleet.close()
+        log.warning("ports from %d are taken (%s): using free ports", first, exc)
+        fleet = Fleet(fleet_specs(config), base_port=0, packed_base_port=0)
+        await fleet.start()
+    machines: list[MachineConfig] = []
+    for machine, sim in zip(config.machines, fleet, strict=True):
+        if machine.transport == "packed":
+            machines.append(machine.model_copy(update={"host": None,
+                                                       "address": f"tcp:127.0.0.1:{sim.packed_port}"}))
+        else:
+            machines.append(machine.model_copy(update={"host": "127.0.0.1", "port": sim.port}))
+    return fleet, config.model_copy(update={"machines": machines})
+
+
+async def run_demo(config_path: Path, duration: float | None) -> int:
+    config = load_config(config_path)
+    fleet, config = await start_fleet(config)
+    mqtt = config.mqtt
+    port = mqtt.effective_port
+    broker = None
+    if broker_answers(mqtt.host, port):
+        print(f"== using the MQTT broker at {mqtt.host}:{port}", flush=True)
+    else:
+        print(f"== no MQTT broker answered at {mqtt.host}:{port}: starting an embedded broker (amqtt) there",
+              flush=True)
+        broker = await start_embedded_broker(mqtt.host, port)
+        if mqtt.protocol != "3.1.1":
+            print("== the embedded broker speaks MQTT 3.1.1 only: the daemon uses 3.1.1 for this run", flush=True)
+            mqtt = mqtt.model_copy(update={"protocol": "3.1.1"})
+            config = config.model_copy(update={"mqtt": mqtt})
+    for machine, sim in zip(config.machines, fleet, strict=True):
+        where = machine.endpoint
+        print(f"== simulated CNC {machine.id:<10} profile {sim.state.profile.name:<5} at {where}", flush=True)
+    prefix = mqtt.json_topics.prefix
+    group = mqtt.sparkplug.group_id if mqtt.sparkplug else "+"
+    print(f"== subscribe: mosquitto_sub -h {mqtt.host} -p {port} -t 'spBv1.0/{group}/#' -t '{prefix}/#' -v",
+          flush=True)
+    print(f"== or:        .venv/bin/focas-edge watch --host {mqtt.host} --port {port}", flush=True)
+    print("== Ctrl-C stops everything", flush=True)
+
+    watcher = Watcher(mqtt.host, port, [f"spBv1.0/{group}/#", f"{prefix}/#"],
+                      printer=lambda line: print(line, flush=True), show_births=False)
+    watcher.start()
+    daemon = Daemon(config)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, daemon.request_stop)
+    if duration is not None:
+        loop.call_later(duration, daemon.request_stop)
+    try:
+        code = await daemon.run()
+    finally:
+        watcher.stop()
+        await fleet.close()
+        if broker is not None:
+            await broker.shutdown()
+    print("== stopped cleanly", flush=True)
+    return code
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m edge.demo", description=__doc__)
+    parser.add_argument("--config", type=Path, default=Path("config/edge.yaml"))
+    parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    parser.add_argument("--log-level", default="WARNING")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for noisy in ("amqtt", "transitions"):
+        logging.getLogger(noisy).setLevel(logging.ERROR)
+    return asyncio.run(run_demo(args.config, args.duration))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
