@@ -117,10 +117,26 @@ class MachinePoller:
         self._dropped: set[str] = set()
         self._plan: pl.MachinePlan | None = None
         self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
+        self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
 
     @property
     def machine_id(self) -> str:
         return self.machine.id
+
+    @property
+    def plan(self) -> pl.MachinePlan | None:
+        """This session's plan (metric names, which reads feed them); None before the first connect."""
+        return self._plan
+
+    def cnc_time_ms(self) -> int:
+        """Now, as the CNC's clock says (gateway time while the CNC clock is untrusted)."""
+        return self.clock.source_time_ms(time.monotonic(), time.time())
+
+    async def report(self, samples: Sequence[Sample]) -> None:
+        """Publish values learned outside a tick (a write's read-back) through change detection."""
+        changed = self._changes.filter(samples)
+        if changed and self.online:
+            await self.sink.device_data(self.machine_id, changed)
 
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> None:
@@ -166,6 +182,7 @@ class MachinePoller:
                  self.session.sysinfo.model_name if self.session.sysinfo else "?")
 
     async def _go_offline(self) -> None:
+        self.session_up.clear()
         if not self.online:
             return
         self.online = False
@@ -189,6 +206,7 @@ class MachinePoller:
         first.samples.append(self._dropped_sample(first.samples))
         await self.sink.device_online(self.machine_id, specs, self._changes.filter(first.samples))
         self.online = True
+        self.session_up.set()
         if first.events or first.history:
             await self._emit_events(first.events, first.history)
         fastest = min(plan.periods.values())
