@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from datetime import UTC
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -148,7 +149,8 @@ async def test_alarm_history_events_carry_ring_times_and_are_published_once(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
     async with Fleet([MachineSpec(profile="30i")], base_port=0, packed_base_port=0) as fleet:
         state = fleet[0].state
-        ring_ms = {round(e.utc_time.timestamp()) * 1000 for e in state.alarm_events()}
+        # The CNC reports whole seconds of its wall clock (here UTC, the machine's configured zone).
+        ring_ms = {round(e.local_time.replace(tzinfo=UTC).timestamp() * 1000) for e in state.alarm_events()}
         assert ring_ms, "the simulator seeds an alarm history"
         machines = (f"  - {{id: m1, transport: packed, address: 'tcp:127.0.0.1:{fleet[0].packed_port}'}}\n")
         text = config_text(mosquitto, tmp_path, machines,
