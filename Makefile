@@ -23,7 +23,7 @@ test: $(STAMP) broker-check lint
 	$(PY) -m pytest -q
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check edge tests bench
+	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 
 unit: $(STAMP)

@@ -411,10 +411,14 @@ def _settime_decode_extra(req: RequestSubpacket, ctx: Context) -> time:
 _TIMER = struct.Struct(">ii")
 _TIMER_LE = struct.Struct("<ii")
 MSEC_PER_MINUTE = 60_000
+# 2**24 minutes is 31.9 years of power-on: beyond any real timer. The bound matters when msec is 0: a
+# little-endian minute count read big-endian lands at or above 2**24 unless its low byte is 0
+# (1 value in 256 stays ambiguous and is read big-endian).
+MAX_TIMER_MINUTES = 1 << 24
 
 
 def _timer_plausible(minutes: int, msec: int) -> bool:
-    return minutes >= 0 and 0 <= msec < MSEC_PER_MINUTE
+    return 0 <= minutes < MAX_TIMER_MINUTES and 0 <= msec < MSEC_PER_MINUTE
 
 
 def _timer_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> TimerValue:

@@ -240,3 +240,17 @@ def test_unused_response_fields() -> None:
     # a payload-less OK answer to a write decodes to None
     req = fn.write_pmc_request("R", 0, b"\x01")
     assert fn.WRITE_PMC.decode_response(ResponseSubpacket(2, 0x8002), req, CTX16) is None
+
+
+def test_little_endian_timer_with_zero_msec_is_recognised() -> None:
+    """A 31i-B sends the timer little-endian; msec 0 must not make it look big-endian."""
+    import struct
+
+    from edge.focas import functions as fn
+    from edge.focas.model import TimerValue
+
+    req = fn.READ_TIMER.request(0)
+    for minutes in (1, 100, 123_457, 5_000_001):
+        payload = struct.pack("<ii", minutes, 0)
+        assert fn._timer_decode(payload, req, fn.Context(8)) == TimerValue(minutes, 0)
+    assert fn._timer_decode(struct.pack(">ii", 100, 0), req, fn.Context(8)) == TimerValue(100, 0)
