@@ -203,6 +203,7 @@ class MachinePoller:
         self._changes = ChangeDetector(plan.deadbands())
         first = await self._tick(plan, set(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
+        first.samples.extend(self._static_samples(plan, first.samples))
         first.samples.append(self._dropped_sample(first.samples))
         await self.sink.device_online(self.machine_id, specs, self._changes.filter(first.samples))
         self.online = True
@@ -238,6 +239,16 @@ class MachinePoller:
                 log.info("static read failed machine=%s error=%s", self.machine_id, result)
         return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
                              tuple(str(s) for s in spindles))
+
+    def _static_samples(self, plan: pl.MachinePlan, samples: Sequence[Sample]) -> list[Sample]:
+        """Values of the once-per-session metrics (sysinfo), stamped like the first tick."""
+        sysinfo = self.session.sysinfo
+        when = samples[0].timestamp_ms if samples else int(time.time() * 1000)
+        out: list[Sample] = []
+        for read in plan.reads:
+            if read.group is pl.Group.STATIC and isinstance(read.item, it.ReadSysInfo) and sysinfo is not None:
+                out.extend(Sample(spec.name, value, spec.type, when) for spec, value in pl.metric_values(read, sysinfo))
+        return out
 
     def _unsupported(self, plan: pl.MachinePlan) -> list[str]:
         capabilities = self.session.capabilities

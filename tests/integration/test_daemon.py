@@ -182,3 +182,16 @@ async def test_alarm_history_events_carry_ring_times_and_are_published_once(
             await stop_daemon(daemon, task)
     later = history()[len(first):]
     assert [e["number"] for e in later] == [1234]
+
+
+async def test_birth_carries_static_identity(mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    async with Fleet([MachineSpec(profile="16i")], base_port=0) as fleet:
+        daemon, task = await start_daemon(config_text(mosquitto, tmp_path, machine_entry("m1", fleet[0].port)))
+        try:
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+        finally:
+            await stop_daemon(daemon, task)
+    metrics = metrics_by_name(observer.on("spBv1.0/plant/DBIRTH/gw/m1")[0].spb())
+    assert metrics["Device/Model"].string_value.startswith("16i")
+    assert metrics["Device/MaxAxis"].int_value == 8
+    assert not metrics["Device/Model"].is_null
