@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from edge.statefile import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -46,18 +46,4 @@ class StateStore:
         """Replace the document atomically (temp file, fsync, rename, fsync the directory)."""
         self.directory.mkdir(parents=True, exist_ok=True)
         data = json.dumps(doc, separators=(",", ":"), sort_keys=True).encode("utf-8")
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=self.directory)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path(name))
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        dir_fd = os.open(self.directory, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
+        write_atomically(self.path(name), data)

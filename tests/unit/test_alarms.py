@@ -14,9 +14,9 @@ from edge.collect.alarms import (
     Watermark,
     WatermarkStore,
     history_event,
-    write_atomically,
 )
 from edge.focas.model import ActiveAlarm, AlarmHistoryEntry
+from edge.statefile import write_atomically
 
 BASE = datetime(2026, 3, 1, 8, 0, 0, tzinfo=UTC)
 
