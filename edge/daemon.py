@@ -24,6 +24,7 @@ from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
 from edge.samples import MetricType, Sample
 from edge.sdnotify import SystemdNotifier
+from edge.status_http import StatusServer
 
 log = logging.getLogger(__name__)
 
@@ -80,11 +81,13 @@ class Daemon:
         self._stop = asyncio.Event()
         self._reload_requested = asyncio.Event()
         self._started = time.monotonic()
+        self.status_http: StatusServer | None = None
 
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> int:
         self.state_dir.mkdir(parents=True, exist_ok=True)
         self._install_signals()
+        await self._start_status_http()
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
         for machine in self.config.machines:
@@ -130,7 +133,19 @@ class Daemon:
             await self.publisher.stop()
         await asyncio.gather(*(p.close() for p in self.pollers.values()), return_exceptions=True)
         self._tasks.clear()
+        if self.status_http is not None:
+            await self.status_http.stop()
+            self.status_http = None
         log.info("stopped")
+
+    async def _start_status_http(self) -> None:
+        """The optional /healthz + /metrics endpoint (config `http`, off by default)."""
+        http = self.config.http
+        if not http.enabled or self.status_http is not None:
+            return
+        server = StatusServer(self, http.host, http.port, http.healthy_share)
+        await server.start()
+        self.status_http = server
 
     def _install_signals(self) -> None:
         loop = asyncio.get_running_loop()
@@ -180,6 +195,8 @@ class Daemon:
             return
         if new.mqtt != self.config.mqtt:
             log.warning("reload: mqtt settings changed; they take effect at the next restart")
+        if new.http != self.config.http:
+            log.warning("reload: http settings changed; they take effect at the next restart")
         old = {m.id: m for m in self.config.machines}
         fresh = {m.id: m for m in new.machines}
         changed = [i for i in old if i in fresh and (old[i] != fresh[i] or

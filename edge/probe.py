@@ -20,7 +20,7 @@ from typing import Any
 
 from edge.focas import items as it
 from edge.focas.errors import EW_FUNC, EW_NOOPT, CncError, FocasError, NotSupported
-from edge.focas.model import PmcType, SysInfo
+from edge.focas.model import ParamRecord, PmcType, SysInfo
 from edge.focas.session import CncSession
 
 
@@ -151,6 +151,9 @@ def summarize(value: Any, limit: int = 60) -> str:
 
 
 def _short(value: Any) -> str:
+    if isinstance(value, ParamRecord):
+        shown = value.values if len(value.values) > 1 else value.value
+        return f"{value.number}/{value.axis} type {value.type} = {shown}"
     if isinstance(value, float):
         return f"{value:g}"
     if hasattr(value, "isoformat"):
@@ -173,16 +176,16 @@ def _native_commands(cnc: CncSession, item: it.ReadItem) -> str:
 
 
 def _step(item: it.ReadItem, result: Any, rtt_ms: float | None, command: str) -> ProbeStep:
-    common = {"function": item.operation, "arguments": describe_arguments(item), "command": command}
+    step = ProbeStep(item.operation, describe_arguments(item), Outcome.OK, rtt_ms, command)
     if isinstance(result, CncError):
         available = result.code not in (EW_FUNC, EW_NOOPT)
-        return ProbeStep(**common, outcome=Outcome.CNC_ERROR if available else Outcome.NOT_AVAILABLE,
-                         rtt_ms=rtt_ms, ew_code=result.code, ew_name=result.name, detail=str(result))
+        return replace(step, outcome=Outcome.CNC_ERROR if available else Outcome.NOT_AVAILABLE,
+                       ew_code=result.code, ew_name=result.name, detail=str(result))
     if isinstance(result, NotSupported):
-        return ProbeStep(**common, outcome=Outcome.NOT_SUPPORTED, rtt_ms=None, detail=result.reason)
+        return replace(step, outcome=Outcome.NOT_SUPPORTED, rtt_ms=None, detail=result.reason)
     if isinstance(result, FocasError):
-        return ProbeStep(**common, outcome=Outcome.FAILED, rtt_ms=rtt_ms, detail=str(result))
-    return ProbeStep(**common, outcome=Outcome.OK, rtt_ms=rtt_ms, detail=summarize(result))
+        return replace(step, outcome=Outcome.FAILED, detail=str(result))
+    return replace(step, detail=summarize(result))
 
 
 async def _try(cnc: CncSession, item: it.ReadItem) -> ProbeStep:
@@ -234,7 +237,7 @@ async def probe(cnc: CncSession, address: str) -> ProbeReport:
     try:
         report.sysinfo = await cnc.connect()
     except FocasError as exc:
-        report.error = f"connect: {exc}"
+        report.error = str(exc)
         return report
     report.connect_ms = round((time.perf_counter() - started) * 1000, 2)
     items = probe_items()
@@ -308,9 +311,10 @@ def report_lines(report: ProbeReport) -> list[str]:
                 why.append(f"{w.paired_read} does not work here")
             note = "; ".join(why) or w.note
             lines.append(f"    {w.operation:<12} {verdict:<14} {note}".rstrip())
-    ok = sum(1 for s in report.steps if s.works)
-    lines.append("")
-    lines.append(f"  {ok} of {len(report.steps)} function(s) answered with data")
+    if report.steps:
+        ok = sum(1 for s in report.steps if s.works)
+        lines.append("")
+        lines.append(f"  {ok} of {len(report.steps)} function(s) answered with data")
     if report.error:
         lines.append(f"  PROBE INCOMPLETE: {report.error}")
     return lines

@@ -3,7 +3,8 @@
     <prefix>/_gateway/online               retained "online" / "offline" (the Will of the JSON connection)
     <prefix>/<machine>/online              retained "online" / "offline"
     <prefix>/<machine>/state/<metric name> retained {"value", "quality", "timestamp", "ts", "type"}
-    <prefix>/<machine>/events/alarm        not retained, one message per event
+    <prefix>/<machine>/events/alarm        not retained, one message per event (replayed ones: "historical")
+    <prefix>/<machine>/history/<metric>    not retained: values replayed from the store-and-forward spool
     <prefix>/<machine>/cmd                 subscribed: write requests (parsed by the command layer)
     <prefix>/<machine>/cmd/reply           replies (or the MQTT 5 response topic of the request)
 
@@ -12,6 +13,7 @@ Sans-IO: builds (topic, bytes) pairs; the publisher sends them.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from datetime import UTC, datetime
@@ -60,7 +62,12 @@ def encode(doc: object) -> bytes:
 
 
 class JsonTopics:
-    """Topic names and message bodies under one prefix."""
+    """Topic names and message bodies under one prefix.
+
+    Every JSON document carries `seq`: one counter per daemon process over all documents, strictly
+    increasing in publish order (it restarts at 0 with the process). Replayed documents also carry
+    `spool_id`, the spool row they came from, which is the same when a crash makes a replay repeat.
+    """
 
     def __init__(self, prefix: str) -> None:
         prefix = prefix.strip("/")
@@ -69,6 +76,13 @@ class JsonTopics:
         self.prefix = prefix
         self.gateway_status_topic = f"{prefix}/{GATEWAY}/online"
         self.command_filter = f"{prefix}/+/cmd"
+        self._seq = itertools.count()
+
+    def _numbered(self, doc: dict[str, object], spool_id: int | None) -> bytes:
+        doc["seq"] = next(self._seq)
+        if spool_id is not None:
+            doc["spool_id"] = spool_id
+        return encode(doc)
 
     def gateway_online(self) -> Outgoing:
         return Outgoing(self.gateway_status_topic, ONLINE, qos=1, retain=True)
@@ -83,12 +97,21 @@ class JsonTopics:
 
     def state(self, machine: str, sample: Sample) -> Outgoing:
         return Outgoing(f"{self.prefix}/{machine}/state/{topic_level(sample.name)}",
-                        encode(sample_document(sample)), qos=0, retain=True)
+                        self._numbered(sample_document(sample), None), qos=0, retain=True)
 
-    def event(self, machine: str, sample: Sample) -> Outgoing:
+    def event(self, machine: str, sample: Sample, spool_id: int | None = None) -> Outgoing:
         doc = sample_document(sample)
         doc["name"] = sample.name
-        return Outgoing(f"{self.prefix}/{machine}/events/alarm", encode(doc), qos=1, retain=False)
+        return Outgoing(f"{self.prefix}/{machine}/events/alarm", self._numbered(doc, spool_id), qos=1,
+                        retain=False)
+
+    def history(self, machine: str, sample: Sample, spool_id: int) -> Outgoing:
+        """A value replayed from the spool: never retained (it must not replace the current state)."""
+        doc = sample_document(sample)
+        doc["name"] = sample.name
+        doc["historical"] = True
+        return Outgoing(f"{self.prefix}/{machine}/history/{topic_level(sample.name)}",
+                        self._numbered(doc, spool_id), qos=1, retain=False)
 
     def reply_topic(self, machine: str) -> str:
         return f"{self.prefix}/{machine}/cmd/reply"

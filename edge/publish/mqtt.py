@@ -9,7 +9,8 @@ What this adds to paho:
   clean start on the first connect only, would break Sparkplug on reconnect;
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
   lock-step after a broker restart;
-- awaitable SUBACK / PUBACK.
+- awaitable SUBACK / PUBACK;
+- nothing of a previous connection is re-sent after a reconnect (the publisher's spool owns redelivery).
 """
 
 from __future__ import annotations
@@ -241,6 +242,12 @@ class MqttConnection:
             self._schedule_retry(client)
             return
         self._attempt = 0
+        # QoS 1 messages of the previous connection would be re-sent by paho now, before our births and
+        # with a stale Sparkplug seq; the publisher's spool re-sends their samples instead.
+        stale = client.drop_out_messages()
+        if stale:
+            log.info("dropped %d unacknowledged message(s) of the previous connection client_id=%s",
+                     len(stale), self._client_id)
         self._to_loop(self._loop_connected, self._will_tag)
 
     def _paho_connect_fail(self, client: paho.Client, userdata: object) -> None:

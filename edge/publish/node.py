@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from operator import attrgetter
 
 from edge.publish import payload as pl
@@ -291,6 +291,22 @@ class SparkplugNode:
             return []
         return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
 
+    def historical_data(self, device_id: str, samples: Sequence[Sample]) -> list[Outgoing]:
+        """Replayed store-and-forward samples: DDATA with is_historical=true and their own timestamps.
+
+        Only while live and the device is born; the device's current values (births) are not touched.
+        Metrics no longer in the DBIRTH are counted as unknown and left out.
+        """
+        dev = self._devices.get(device_id)
+        if dev is None or not (self.live and dev.online):
+            return []
+        known = self._known(device_id, dev, samples)
+        if not known:
+            return []
+        marked = [s if s.historical else replace(s, historical=True) for s in known]
+        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, marked,
+                           track_quality=False)]
+
     def device_offline(self, device_id: str) -> list[Outgoing]:
         """DDEATH (with seq) if the device was born in this session; it keeps its aliases and values."""
         dev = self._devices.get(device_id)
@@ -336,13 +352,18 @@ class SparkplugNode:
         self.encode_errors += 1
         log.warning("metric value cannot be encoded metric=%s error=%s", name, exc)
 
-    def _data(self, topic: str, dev: _Device, samples: Sequence[Sample]) -> Outgoing:
-        """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality)."""
+    def _data(self, topic: str, dev: _Device, samples: Sequence[Sample], *,
+              track_quality: bool = True) -> Outgoing:
+        """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality).
+
+        `track_quality` False (historical replay): a non-GOOD quality is still stated on the metric, but
+        the live "last published quality" bookkeeping is left alone.
+        """
         ts = self._clock()
         p = Payload(timestamp=ts, seq=self._next_seq())
         metrics = p.metrics
         encoders = dev.encoders
-        not_good = dev.not_good
+        not_good = dev.not_good if track_quality else set(dev.not_good)
         good = Quality.GOOD
         for s in sorted(samples, key=_by_timestamp):
             name = s.name

@@ -3,7 +3,13 @@
 Runs entirely on one asyncio loop. Every Sparkplug message is built (seq assigned) and handed to paho in
 the same synchronous step, so this object is the single writer of seq and wire order equals seq order.
 Nothing here blocks or raises because the broker is away: what cannot be published goes to the `Spool`
-hook (a counter for now; the store-and-forward issue plugs a disk spool in there).
+(edge.publish.spool.DiskSpool in the daemon; a counter by default).
+
+Store and forward (docs/reliability.md): live DATA is QoS 0, so each connection keeps an outbox of live
+batches until a QoS 1 probe's PUBACK confirms them (edge.publish.forwarding). A probe without PUBACK in
+time, a failed publish or a lost connection makes the connection *suspect*: unconfirmed and new samples go
+to the spool, the socket is dropped, and after the reconnect (and, for Sparkplug, the births) the spool is
+replayed oldest first, paced, as separate historical messages, while live data flows at once.
 """
 
 from __future__ import annotations
@@ -13,11 +19,12 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
-from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from dataclasses import dataclass, replace
+from typing import Any, Literal, Protocol, runtime_checkable
 
 from edge.publish.aliases import AliasMap
 from edge.publish.bdseq import BdSeqCounter
+from edge.publish.forwarding import ForwardingPolicy, HeldBatch, Outbox
 from edge.publish.json_topics import JsonTopics, encode
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will, response_properties
 from edge.publish.node import (
@@ -35,8 +42,11 @@ from edge.samples import MetricSpec, Sample
 
 log = logging.getLogger(__name__)
 
+PROBE_PREFIX = "focas-edge/probe"  # QoS 1 delivery barriers: <prefix>/<client id>, empty, not retained
+
 Format = Literal["sparkplug", "json"]
 SampleKind = Literal["data", "events"]
+FORMATS: tuple[Format, ...] = ("sparkplug", "json")
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +63,19 @@ class Spool(Protocol):
     """Receives what could not be published (broker away, no birth yet). A disk spool replays it later."""
 
     def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None: ...
+
+
+@runtime_checkable
+class ReplaySpool(Protocol):
+    """A spool that can give its rows back for replay (edge.publish.spool.DiskSpool)."""
+
+    def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None: ...
+
+    def oldest(self, fmt: Format, limit: int, devices: Any = None) -> Sequence[Any]: ...
+
+    def ack(self, ids: Sequence[int]) -> None: ...
+
+    def pending(self, fmt: Format | None = None) -> int: ...
 
 
 class DroppingSpool:
@@ -73,7 +96,7 @@ class Publisher:
     """One Sparkplug edge node (+ devices) and/or the JSON topics, over one or two MQTT connections."""
 
     def __init__(self, settings: PublishSettings, *, spool: Spool | None = None,
-                 clock: Callable[[], int] = now_ms) -> None:
+                 clock: Callable[[], int] = now_ms, forwarding: ForwardingPolicy | None = None) -> None:
         if not settings.formats or not set(settings.formats) <= {"sparkplug", "json"}:
             raise ValueError(f"formats {sorted(settings.formats)}: expected 'sparkplug' and/or 'json'")
         self.settings = settings
@@ -84,6 +107,13 @@ class Publisher:
         self._counters: Counter[str] = Counter()
         self._tasks: set[asyncio.Task[None]] = set()
         self._stopping = False
+        # Store and forward, per format
+        self.forwarding = forwarding or ForwardingPolicy()
+        self._outbox: dict[Format, Outbox] = {"sparkplug": Outbox(), "json": Outbox()}
+        self._suspect: dict[Format, bool] = {"sparkplug": False, "json": False}
+        self._replaying: dict[Format, bool] = {"sparkplug": False, "json": False}
+        self._replay_again: dict[Format, bool] = {"sparkplug": False, "json": False}
+        self._json_session = 0
         # Sparkplug
         self._sparkplug = "sparkplug" in settings.formats
         self._bdseq = BdSeqCounter(store)
@@ -160,6 +190,8 @@ class Publisher:
         """DDEATH every online device, NDEATH, DISCONNECT (MQTT 5: reason 0x04); JSON: offline, retained."""
         self._stopping = True
         self._cancel_rebirth()
+        for fmt in FORMATS:
+            await self._settle(fmt, self._conn(fmt))
         spb, self._spb = self._spb, None
         if spb is not None:
             await self._stop_sparkplug(spb)
@@ -176,6 +208,20 @@ class Publisher:
             task.cancel()
         if self._tasks:
             await asyncio.gather(*self._tasks, return_exceptions=True)
+        for fmt in FORMATS:
+            self._spool_outbox(fmt)
+
+    async def _settle(self, fmt: Format, conn: MqttConnection | None) -> None:
+        """Before a clean stop: confirm the outbox with one barrier, or spool what it holds."""
+        outbox = self._outbox[fmt]
+        if not len(outbox):
+            return
+        if conn is not None and conn.connected and not self._suspect[fmt]:
+            mark = outbox.mark()
+            if await self._barrier(fmt, conn, drop_on_timeout=False):
+                outbox.confirm(mark)
+                return
+        self._spool_outbox(fmt)
 
     async def _stop_sparkplug(self, spb: MqttConnection) -> None:
         last: Outgoing | None = None
@@ -211,6 +257,8 @@ class Publisher:
         """A machine's session is up: DBIRTH with every metric; JSON online + retained state."""
         if self._sparkplug:
             self._send_spb(self._node.device_online(device_id, specs, samples))
+            if self._node.live:
+                self._kick_replay("sparkplug")  # rows this device left in the spool
         if self._topics is not None:
             self._json_online[device_id] = True
             state = self._json_state.setdefault(device_id, {})
@@ -231,40 +279,40 @@ class Publisher:
             return
         if self._sparkplug:
             node = self._node
-            if node.born:
-                self._send_spb(node.device_data(device_id, samples))
+            if self._spb_live(device_id):
+                self._send_live("sparkplug", node.device_data(device_id, samples),
+                                HeldBatch(device_id, "data", samples))
             else:
                 node.device_data(device_id, samples)  # births will carry the latest values
-                self.spool.hold("sparkplug", device_id, "data", samples)
+                self._hold("sparkplug", device_id, "data", samples)
         if self._topics is not None:
             state = self._json_state.setdefault(device_id, {})
             for s in samples:
                 state[s.name] = s
-            conn = self._json
-            if conn is not None and conn.connected:
+            if self._json_live():
                 topics = self._topics
-                for s in samples:
-                    self._send_json(conn, topics.state(device_id, s))
+                self._send_live("json", [topics.state(device_id, s) for s in samples],
+                                HeldBatch(device_id, "data", samples))
             else:
-                self.spool.hold("json", device_id, "data", samples)
+                self._hold("json", device_id, "data", samples)
 
     async def device_events(self, device_id: str, events: Sequence[Sample]) -> None:
         """Alarm events (raise/clear, history): DDATA with the CNC occurrence time; JSON event topic."""
         if not events:
             return
         if self._sparkplug:
-            node = self._node
-            if node.born:
-                self._send_spb(node.device_events(device_id, events))
+            if self._spb_live(device_id):
+                self._send_live("sparkplug", self._node.device_events(device_id, events),
+                                HeldBatch(device_id, "events", events))
             else:
-                self.spool.hold("sparkplug", device_id, "events", events)
+                self._hold("sparkplug", device_id, "events", events)
         if self._topics is not None:
-            conn = self._json
-            if conn is not None and conn.connected:
-                for s in events:
-                    self._send_json(conn, self._topics.event(device_id, s))
+            if self._json_live():
+                topics = self._topics
+                self._send_live("json", [topics.event(device_id, s) for s in events],
+                                HeldBatch(device_id, "events", events))
             else:
-                self.spool.hold("json", device_id, "events", events)
+                self._hold("json", device_id, "events", events)
 
     async def device_offline(self, device_id: str) -> None:
         """A machine's session is lost: DDEATH; JSON offline, retained."""
@@ -306,6 +354,11 @@ class Publisher:
         dropped = getattr(self.spool, "dropped", None)
         if isinstance(dropped, int):
             out["samples_dropped"] = dropped
+        if isinstance(self.spool, ReplaySpool):
+            out["spool_rows"] = self.spool.pending()
+        out["unconfirmed_batches"] = sum(len(o) for o in self._outbox.values())
+        for key in ("spooled_batches", "replayed_messages", "replayed_rows", "suspect_dead", "probes"):
+            out.setdefault(key, 0)
         return out
 
     @property
@@ -325,10 +378,13 @@ class Publisher:
         assert isinstance(tag, int), "the Sparkplug Will always carries its bdSeq"
         self._spb_session += 1
         self._subscribed = False
+        self._suspect["sparkplug"] = False
         self._node.session_started(tag)
         if self._host is not None:
             self._host.new_session()
         self._spawn(self._spb_subscribe(self._spb_session))
+        if self._spb is not None:
+            self._spawn(self._probe_loop("sparkplug", self._spb, self._spb_session))
 
     async def _spb_subscribe(self, session: int) -> None:
         conn = self._spb
@@ -358,8 +414,10 @@ class Publisher:
             return
         self._counters["births"] += 1
         self._send_spb(self._node.births())
+        self._kick_replay("sparkplug")
 
     def _spb_disconnected(self) -> None:
+        self._spool_outbox("sparkplug")
         self._spb_session += 1
         self._subscribed = False
         self._cancel_rebirth()
@@ -393,6 +451,7 @@ class Publisher:
             return
         log.warning("primary host offline: NDEATH and reconnect host=%s",
                     self._host.host_id if self._host else None)
+        await self._settle("sparkplug", conn)
         ndeath = self._node.ndeath()
         self._node.session_lost()
         self._cancel_rebirth()
@@ -418,6 +477,7 @@ class Publisher:
         self._last_rebirth = time.monotonic()
         self._counters["rebirths"] += 1
         self._send_spb(self._node.births())
+        self._kick_replay("sparkplug")
 
     def _cancel_rebirth(self) -> None:
         if self._rebirth_handle is not None:
@@ -434,13 +494,16 @@ class Publisher:
         source = CommandSource("sparkplug", msg.topic)
         self._spawn(_await(handler(event.device_id, event.metric_name, event.value, source)))
 
-    def _send_spb(self, messages: Sequence[Outgoing], conn: MqttConnection | None = None) -> None:
+    def _send_spb(self, messages: Sequence[Outgoing], conn: MqttConnection | None = None) -> bool:
         conn = conn or self._spb
+        ok = True
         for m in messages:
             if conn is not None and conn.publish(m.topic, m.payload, m.qos, m.retain):
                 self._counters["published"] += 1
             else:
                 self._counters["dropped"] += 1
+                ok = False
+        return ok
 
     # -- JSON session --------------------------------------------------------------------------------
 
@@ -453,6 +516,8 @@ class Publisher:
         conn, topics = self._json, self._topics
         if conn is None or topics is None:
             return
+        self._json_session += 1
+        self._suspect["json"] = False
         # A broker restart may have lost retained messages: state them all again.
         self._send_json(conn, topics.gateway_online())
         for device_id, online in self._json_online.items():
@@ -460,6 +525,8 @@ class Publisher:
             for s in self._json_state.get(device_id, {}).values():
                 self._send_json(conn, topics.state(device_id, s))
         self._spawn(self._json_subscribe(conn))
+        self._spawn(self._probe_loop("json", conn, self._json_session))
+        self._kick_replay("json")
 
     async def _json_subscribe(self, conn: MqttConnection) -> None:
         assert self._topics is not None
@@ -470,7 +537,8 @@ class Publisher:
             conn.drop_socket()
 
     def _json_disconnected(self) -> None:
-        pass
+        self._json_session += 1
+        self._spool_outbox("json")
 
     def _json_message(self, msg: InboundMessage) -> None:
         assert self._topics is not None
@@ -485,11 +553,176 @@ class Publisher:
         source = CommandSource("json", msg.topic, msg.response_topic, msg.correlation_data)
         self._spawn(_await(handler(machine, msg.payload, source)))
 
-    def _send_json(self, conn: MqttConnection, m: Outgoing) -> None:
+    def _send_json(self, conn: MqttConnection, m: Outgoing) -> bool:
         if conn.publish(m.topic, m.payload, m.qos, m.retain):
             self._counters["published"] += 1
-        else:
-            self._counters["dropped"] += 1
+            return True
+        self._counters["dropped"] += 1
+        return False
+
+    # -- store and forward ---------------------------------------------------------------------------
+
+    def _spb_live(self, device_id: str) -> bool:
+        """Sparkplug DATA for this device can go out live now."""
+        conn = self._spb
+        return (conn is not None and conn.connected and self._node.live and self._node.is_online(device_id)
+                and not self._suspect["sparkplug"])
+
+    def _json_live(self) -> bool:
+        conn = self._json
+        return conn is not None and conn.connected and not self._suspect["json"]
+
+    def _conn(self, fmt: Format) -> MqttConnection | None:
+        return self._spb if fmt == "sparkplug" else self._json
+
+    def _session(self, fmt: Format) -> int:
+        return self._spb_session if fmt == "sparkplug" else self._json_session
+
+    def _send_live(self, fmt: Format, messages: Sequence[Outgoing], batch: HeldBatch) -> None:
+        """Publish live messages; remember the batch until a barrier confirms it, or spool it on failure."""
+        if not messages:
+            return
+        conn = self._conn(fmt)
+        if conn is None:
+            self._hold(fmt, batch.device_id, batch.kind, batch.samples)
+            return
+        sent = self._send_spb(messages, conn) if fmt == "sparkplug" else \
+            all([self._send_json(conn, m) for m in messages])
+        self._outbox[fmt].record(batch)
+        if not sent:
+            self._suspect_dead(fmt, conn, "publish refused by the MQTT client")
+
+    def _hold(self, fmt: Format, device_id: str, kind: str, samples: Sequence[Sample]) -> None:
+        """Spool samples that cannot go live, after any older unconfirmed ones (keeps the order)."""
+        self._spool_outbox(fmt)
+        self._spool_batch(fmt, HeldBatch(device_id, kind, samples))
+
+    def _spool_batch(self, fmt: Format, batch: HeldBatch) -> None:
+        kind: SampleKind = "events" if batch.kind == "events" else "data"
+        try:
+            self.spool.hold(fmt, batch.device_id, kind, batch.samples)
+        except Exception as exc:  # a full disk must not take the publisher down
+            self._counters["spool_errors"] += 1
+            log.error("spool write failed, samples lost format=%s device=%s samples=%d error=%s", fmt,
+                      batch.device_id, len(batch.samples), exc)
+            return
+        self._counters["spooled_batches"] += 1
+
+    def _spool_outbox(self, fmt: Format) -> None:
+        for batch in self._outbox[fmt].take_all():
+            self._spool_batch(fmt, batch)
+
+    def _suspect_dead(self, fmt: Format, conn: MqttConnection, reason: str, drop: bool = True) -> None:
+        """No proof of delivery: spool from now on, keep the unconfirmed, and force a reconnect."""
+        if not self._suspect[fmt]:
+            self._counters["suspect_dead"] += 1
+            log.warning("MQTT connection suspected dead, spooling format=%s reason=%s", fmt, reason)
+        self._suspect[fmt] = True
+        self._spool_outbox(fmt)
+        if drop and conn.connected:
+            conn.drop_socket()
+
+    def _probe_topic(self, fmt: Format) -> str:
+        client_id = self.settings.client_id
+        if fmt == "json" and self._sparkplug:
+            client_id = f"{client_id}-json"
+        return f"{PROBE_PREFIX}/{client_id}"
+
+    async def _barrier(self, fmt: Format, conn: MqttConnection, *, drop_on_timeout: bool = True) -> bool:
+        """Publish a QoS 1 probe and wait for its PUBACK: True means all sent before it arrived."""
+        self._counters["probes"] += 1
+        try:
+            await conn.publish_confirmed(self._probe_topic(fmt), b"", qos=1, retain=False,
+                                         timeout=self.forwarding.probe_timeout_s)
+        except MqttUnavailable as exc:
+            self._suspect_dead(fmt, conn, str(exc), drop=drop_on_timeout)
+            return False
+        return True
+
+    async def _probe_loop(self, fmt: Format, conn: MqttConnection, session: int) -> None:
+        """Confirm live batches every probe interval while this connection session lasts."""
+        outbox = self._outbox[fmt]
+        while True:
+            await asyncio.sleep(self.forwarding.probe_interval_s)
+            if session != self._session(fmt) or self._suspect[fmt] or not conn.connected:
+                return
+            if not len(outbox):
+                continue
+            mark = outbox.mark()
+            if not await self._barrier(fmt, conn):
+                return
+            outbox.confirm(mark)
+
+    def _kick_replay(self, fmt: Format) -> None:
+        """Start replaying the spool for `fmt` (or make the running replay look again)."""
+        if self._stopping or not isinstance(self.spool, ReplaySpool):
+            return
+        if self._replaying[fmt]:
+            self._replay_again[fmt] = True
+            return
+        conn = self._conn(fmt)
+        if conn is None:
+            return
+        self._replaying[fmt] = True
+        self._replay_again[fmt] = False
+        self._spawn(self._replay(fmt, conn, self._session(fmt)))
+
+    async def _replay(self, fmt: Format, conn: MqttConnection, session: int) -> None:
+        try:
+            await self._replay_rows(fmt, conn, session)
+        finally:
+            self._replaying[fmt] = False
+
+    async def _replay_rows(self, fmt: Format, conn: MqttConnection, session: int) -> None:
+        """Oldest first, paced, each row as its own historical message(s); rows acked after a barrier."""
+        spool = self.spool
+        assert isinstance(spool, ReplaySpool)
+        pause = 1.0 / self.forwarding.replay_messages_per_s
+        started = time.monotonic()
+        sent_rows = 0
+
+        def current() -> bool:
+            return (session == self._session(fmt) and conn.connected and not self._suspect[fmt]
+                    and not self._stopping and (fmt == "json" or self._node.live))
+
+        while current():
+            devices = [d for d in self._node.device_ids() if self._node.is_online(d)] \
+                if fmt == "sparkplug" else None
+            entries = spool.oldest(fmt, self.forwarding.replay_batch, devices)
+            if not entries:
+                if self._replay_again[fmt]:
+                    self._replay_again[fmt] = False
+                    continue
+                break
+            for entry in entries:
+                for m in self._historical_messages(fmt, entry):
+                    if not current():
+                        return
+                    sent = self._send_spb([m], conn) if fmt == "sparkplug" else self._send_json(conn, m)
+                    if not sent:
+                        self._suspect_dead(fmt, conn, "replay publish refused by the MQTT client")
+                        return
+                    self._counters["replayed_messages"] += 1
+                    await asyncio.sleep(pause)
+            if not current() or not await self._barrier(fmt, conn):
+                return
+            spool.ack([e.id for e in entries])
+            self._counters["replayed_rows"] += len(entries)
+            sent_rows += len(entries)
+        if sent_rows:
+            log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
+                     time.monotonic() - started, spool.pending(fmt))
+
+    def _historical_messages(self, fmt: Format, entry: Any) -> list[Outgoing]:
+        samples = [s if s.historical else replace(s, historical=True) for s in entry.samples]
+        if fmt == "sparkplug":
+            return self._node.historical_data(entry.device_id, samples)
+        topics = self._topics
+        if topics is None:
+            return []
+        if entry.kind == "events":
+            return [topics.event(entry.device_id, s, entry.id) for s in samples]
+        return [topics.history(entry.device_id, s, entry.id) for s in samples]
 
     # -- tasks ---------------------------------------------------------------------------------------
 

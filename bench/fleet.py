@@ -1,0 +1,203 @@
+"""Fleet scale: N simulated CNCs (separate processes) -> the daemon (its own process) -> mosquitto.
+
+Per N: the daemon's CPU seconds (user+sys) per machine-cycle, its RSS, achieved cycles/s against the
+plan (N x 10 Hz), poll overruns, and change-to-broker latency measured by a subscriber. A cycle is one
+data PDU the simulators answered (the collector sends one per tick).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import statistics
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from bench.procs import DaemonProcess, SimProcess
+from bench.report import Check, Result, percentile
+from bench.subscriber import LatencySubscriber
+from bench.workload import STAMP_MACRO, poll_section
+from tests.helpers import Mosquitto, mosquitto_binary
+
+GROUP = "bench"
+MACHINES_PER_SIM = 50
+CPU_TARGET_US = 150.0
+RSS_TARGET_MB = 80.0
+LATENCY_SLACK_S = 0.020
+
+
+@dataclass
+class FleetOptions:
+    machines: int
+    period_s: float = 0.1
+    duration_s: float = 20.0
+    warmup_s: float = 3.0
+    profile_to: Path | None = None
+
+
+def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float) -> str:
+    poll = poll_section(period_s)
+    machines = "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll}}}\n"
+                       for i, port in enumerate(ports))
+    return (f"mqtt:\n  host: {broker.host}\n  port: {broker.port}\n  formats: [sparkplug]\n"
+            f"  sparkplug: {{group_id: {GROUP}, edge_node_id: gw}}\n"
+            f"state_dir: {state_dir}\nmachines:\n{machines}")
+
+
+def wait_until(condition: Any, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"timed out after {timeout:.0f}s waiting for {what}")
+        time.sleep(0.05)
+
+
+def run_fleet(options: FleetOptions) -> dict[str, Any]:
+    """One measurement at one fleet size; every process it starts is stopped before it returns."""
+    binary = mosquitto_binary()
+    if binary is None:
+        raise RuntimeError("mosquitto is not installed (make bench runs scripts/ensure-mosquitto.sh)")
+    workdir = Path(tempfile.mkdtemp(prefix="bench-fleet-"))
+    broker = Mosquitto(binary)
+    sims: list[SimProcess] = []
+    daemon: DaemonProcess | None = None
+    subscriber: LatencySubscriber | None = None
+    try:
+        broker.start()
+        broker_process = psutil.Process(broker.proc.pid) if broker.proc else None
+        subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}")
+        n = options.machines
+        sizes = [len(part) for part in _split(n, math.ceil(n / MACHINES_PER_SIM))]
+        sims = [SimProcess(size, stamp_macro=STAMP_MACRO) for size in sizes]
+        ports = [port for sim in sims for port in sim.ports]
+        config = workdir / "edge.yaml"
+        config.write_text(config_text(broker, workdir / "state", ports, options.period_s))
+        daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to)
+        sub = subscriber
+        wait_until(lambda: len(sub.births) >= n or daemon.proc.poll() is not None, 30 + n * 0.2,
+                   f"DBIRTH of {n} machines")
+        if daemon.proc.poll() is not None:
+            raise RuntimeError(f"daemon exited with {daemon.proc.returncode}; see {workdir / 'daemon.log'}")
+        time.sleep(options.warmup_s)
+        measured = _window(options, daemon, sims, subscriber, broker_process)
+        measured["deaths"] = subscriber.deaths
+        return measured
+    finally:
+        if daemon is not None:
+            code = daemon.stop()
+            if code not in (0, None) and options.profile_to is None:
+                print(f"warning: daemon exit code {code}; log kept in {workdir}")
+        for sim in sims:
+            sim.stop()
+        if subscriber is not None:
+            subscriber.close()
+        broker.close()
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def _split(count: int, parts: int) -> list[range]:
+    size = math.ceil(count / parts)
+    return [range(i, min(i + size, count)) for i in range(0, count, size)]
+
+
+def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess],
+            subscriber: LatencySubscriber, broker: psutil.Process | None) -> dict[str, Any]:
+    psutil.cpu_percent(None)
+    subscriber.take()
+    subscriber.recording = True
+    overruns_before = subscriber.overruns or 0
+    sims_before = [sim.stats() for sim in sims]
+    cpu_before = daemon.cpu_seconds()
+    broker_before = _cpu(broker)
+    started = time.monotonic()
+    rss: list[int] = []
+    while time.monotonic() - started < options.duration_s:
+        rss.append(daemon.rss_bytes())
+        time.sleep(min(1.0, max(0.0, options.duration_s - (time.monotonic() - started))))
+    elapsed = time.monotonic() - started
+    cpu = daemon.cpu_seconds() - cpu_before
+    sims_after = [sim.stats() for sim in sims]
+    subscriber.recording = False
+    rss.append(daemon.rss_bytes())
+    system_cpu = psutil.cpu_percent(None)
+    change, sample = subscriber.take()
+    cycles = sum(a["data_pdus"] - b["data_pdus"] for a, b in zip(sims_after, sims_before, strict=True))
+    sim_cpu = sum(a["cpu_s"] - b["cpu_s"] for a, b in zip(sims_after, sims_before, strict=True))
+    planned = options.machines / options.period_s
+    return {
+        "machines": options.machines,
+        "cpu_us_per_cycle": cpu / cycles * 1e6 if cycles else float("nan"),
+        "gateway_cores": cpu / elapsed,
+        "rss_mb": max(rss) / 1e6,
+        "cycles_per_s": cycles / elapsed,
+        "planned_per_s": planned,
+        "achieved_pct": 100 * cycles / elapsed / planned,
+        "overruns": (subscriber.overruns or 0) - overruns_before,
+        "change_p50_ms": percentile(change, 50) * 1000,
+        "change_p99_ms": percentile(change, 99) * 1000,
+        "changes_seen": len(change),
+        "sample_p50_ms": percentile(sample, 50) * 1000,
+        "sample_p99_ms": percentile(sample, 99) * 1000,
+        "sim_cores": sim_cpu / elapsed,
+        "broker_cores": (_cpu(broker) - broker_before) / elapsed,
+        "host_cpu_pct": system_cpu,
+        "window_s": elapsed,
+    }
+
+
+def _cpu(process: psutil.Process | None) -> float:
+    if process is None:
+        return 0.0
+    times = process.cpu_times()
+    return float(times.user + times.system)
+
+
+SUMMARY_KEYS = ("cpu_us_per_cycle", "gateway_cores", "rss_mb", "cycles_per_s", "achieved_pct", "overruns",
+                "change_p50_ms", "change_p99_ms", "sample_p50_ms", "sample_p99_ms", "sim_cores", "broker_cores",
+                "host_cpu_pct")
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median of each figure over repeated runs, plus the spread of the CPU figure."""
+    row: dict[str, Any] = {"machines": runs[0]["machines"], "runs": len(runs)}
+    for key in SUMMARY_KEYS:
+        values = [r[key] for r in runs if not (isinstance(r[key], float) and math.isnan(r[key]))]
+        row[key] = statistics.median(values) if values else float("nan")
+    cpu = [r["cpu_us_per_cycle"] for r in runs]
+    row["cpu_us_range"] = f"{min(cpu):.0f}..{max(cpu):.0f}"
+    row["planned_per_s"] = runs[0]["planned_per_s"]
+    return row
+
+
+def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, duration_s: float | None = None,
+        profile_to: Path | None = None) -> Result:
+    sizes = sizes or ([5, 20] if quick else [10, 50, 100, 200])
+    duration = duration_s or (5.0 if quick else 20.0)
+    repeats = 1 if quick else repeats
+    command = "python -m bench fleet" + (" --quick" if quick else "") + \
+        (f" --sizes {','.join(map(str, sizes))}" if sizes else "") + f" --repeat {repeats} --duration {duration:g}"
+    result = Result("fleet", command)
+    by_size: dict[int, dict[str, Any]] = {}
+    for n in sizes:
+        runs = [run_fleet(FleetOptions(n, duration_s=duration, warmup_s=1.0 if quick else 3.0, profile_to=profile_to))
+                for _ in range(repeats)]
+        by_size[n] = summarise(runs)
+        result.rows.append(by_size[n])
+        print(f"  fleet N={n}: {by_size[n]['cpu_us_per_cycle']:.0f} us/cycle, "
+              f"{by_size[n]['achieved_pct']:.0f}% of plan, change p99 {by_size[n]['change_p99_ms']:.0f} ms", flush=True)
+    worst_cpu = max(row["cpu_us_per_cycle"] for row in by_size.values())
+    result.checks.append(Check("gateway CPU per machine-cycle (worst N)", worst_cpu, CPU_TARGET_US, "<=", " us"))
+    biggest = max(by_size)
+    result.checks.append(Check(f"RSS with {biggest} machines", by_size[biggest]["rss_mb"], RSS_TARGET_MB, "<=", " MB"))
+    at = 100 if 100 in by_size else biggest
+    result.checks.append(Check(f"change-to-broker p99 at {at} machines", by_size[at]["change_p99_ms"],
+                               (0.1 + LATENCY_SLACK_S) * 1000, "<=", " ms"))
+    result.notes.append("cycles = data PDUs the simulators answered; CPU = user+sys of the daemon process only")
+    result.notes.append("change = simulator sets a macro to its clock -> subscriber receipt (includes up to one "
+                        "poll period of waiting); sample = CNC timestamp of the tick -> receipt")
+    return result

@@ -1,0 +1,98 @@
+"""Child processes a benchmark owns: the simulator fleets, the daemon and the broker; always stopped."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def python_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+class SimProcess:
+    """`python -m bench.simproc` as a child: ports once ready, stats on request."""
+
+    def __init__(self, machines: int, *, latency: float = 0.0, stamp_macro: int = 0, fill_macros: str = "",
+                 timeout: float = 60.0) -> None:
+        command = [sys.executable, "-m", "bench.simproc", "--machines", str(machines), "--latency", str(latency)]
+        if stamp_macro:
+            command += ["--stamp-macro", str(stamp_macro)]
+        if fill_macros:
+            command += ["--fill-macros", fill_macros]
+        self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                     cwd=REPO, env=python_env())
+        first = self._line(timeout)
+        self.ports: list[int] = first["ports"]
+        self.process = psutil.Process(self.proc.pid)
+
+    def _line(self, timeout: float) -> dict[str, Any]:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"simulator process exited with {self.proc.wait(timeout)} before answering")
+        return dict(json.loads(line))
+
+    def stats(self) -> dict[str, float]:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write("stats\n")
+        self.proc.stdin.flush()
+        return {k: float(v) for k, v in self._line(10).items()}
+
+    def stop(self) -> None:
+        if self.proc.poll() is not None:
+            return
+        try:
+            assert self.proc.stdin is not None
+            self.proc.stdin.write("stop\n")
+            self.proc.stdin.close()
+            self.proc.wait(10)
+        except (OSError, subprocess.TimeoutExpired):
+            self.proc.kill()
+            self.proc.wait(10)
+
+
+class DaemonProcess:
+    """`python -m edge run --config FILE` as a child (optionally under pyinstrument); its CPU is measurable."""
+
+    def __init__(self, config: Path, log: Path, profile_to: Path | None = None) -> None:
+        if profile_to is None:
+            command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
+        else:
+            command = [sys.executable, "-m", "pyinstrument", "--renderer", "text", "--show-all",
+                       "-o", str(profile_to), "-m", "edge", "run", "--config", str(config)]
+        self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
+        self.proc = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, cwd=REPO,
+                                     env=python_env())
+        self.process = psutil.Process(self.proc.pid)
+
+    def cpu_seconds(self) -> float:
+        times = self.process.cpu_times()
+        return float(times.user + times.system)
+
+    def rss_bytes(self) -> int:
+        return int(self.process.memory_info().rss)
+
+    def stop(self, timeout: float = 30.0) -> int | None:
+        try:
+            if self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGTERM)
+                try:
+                    self.proc.wait(timeout)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait(10)
+            return self.proc.returncode
+        finally:
+            self._log.close()

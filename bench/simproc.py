@@ -1,0 +1,103 @@
+"""A simulated fleet in its own process, driven over stdin/stdout by a benchmark.
+
+    python -m bench.simproc --machines 50 [--latency 0.002] [--stamp-macro 509] [--fill-macros 500-599]
+
+Prints one JSON line ``{"ports": [...]}`` when every machine listens, then answers each ``stats`` line
+on stdin with a JSON line (data PDUs and subpackets served, this process's CPU seconds); ``stop`` or
+end of input closes the fleet. With --stamp-macro each machine sets that macro to its own wall-clock
+time (seconds modulo 1000, millisecond resolution) at random moments, so a subscriber can tell how
+long a change took to reach the broker: latency = receipt time - value (mod 1000).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import random
+import sys
+import time
+
+from edge.sim.fleet import Fleet, MachineSpec
+from edge.sim.state import CycleSpec
+
+STAMP_MODULO = 1000.0
+WRITE_LOG_LIMIT = 1000
+
+
+def stamp_value(now: float) -> float:
+    """The value a stamp macro carries for a change at `now` (epoch seconds)."""
+    return round(now % STAMP_MODULO, 3)
+
+
+def stamp_latency(value: float, received: float) -> float:
+    """Seconds from the change a stamp `value` records to `received` (epoch seconds)."""
+    return (received - value) % STAMP_MODULO
+
+
+async def stamp_changes(fleet: Fleet, macro: int, low: float, high: float) -> None:
+    """Every machine changes `macro` to the current time at random intervals in [low, high) seconds."""
+    due = [time.time() + random.uniform(0, high) for _ in fleet]
+    while True:
+        now = time.time()
+        for index, machine in enumerate(fleet):
+            if due[index] <= now:
+                machine.state.write_macro(macro, stamp_value(time.time()), protocol="bench")
+                due[index] = now + random.uniform(low, high)
+                if len(machine.state.write_log) > WRITE_LOG_LIMIT:
+                    machine.state.write_log.clear()
+        await asyncio.sleep(max(0.001, min(due) - time.time()))
+
+
+def stats(fleet: Fleet) -> dict[str, float]:
+    times = os.times()
+    return {"data_pdus": sum(m.native.stats.data_pdus for m in fleet),
+            "subpackets": sum(m.native.stats.subpackets for m in fleet),
+            "cpu_s": times.user + times.system, "time": time.time()}
+
+
+async def serve(args: argparse.Namespace) -> None:
+    first, _, last = args.fill_macros.partition("-") if args.fill_macros else ("", "", "")
+    macros = ({n: float(n) + 0.5 for n in range(int(first), int(last or first) + 1)} if first else {})
+    specs = [MachineSpec(profile=args.profile, macros=macros, faults={"latency": args.latency},
+                         cycle=CycleSpec(alarm_every=0)) for _ in range(args.machines)]
+    fleet = Fleet(specs, base_port=0)
+    await fleet.start()
+    stamper = None
+    if args.stamp_macro:
+        stamper = asyncio.create_task(stamp_changes(fleet, args.stamp_macro, args.stamp_min, args.stamp_max))
+    print(json.dumps({"ports": [m.port for m in fleet], "pid": os.getpid()}), flush=True)
+    loop = asyncio.get_running_loop()
+    reader = asyncio.StreamReader()
+    await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
+    try:
+        while line := await reader.readline():
+            command = line.decode().strip()
+            if command == "stats":
+                print(json.dumps(stats(fleet)), flush=True)
+            elif command == "stop":
+                break
+    finally:
+        if stamper is not None:
+            stamper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await stamper
+        await fleet.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--machines", type=int, default=1)
+    parser.add_argument("--profile", default="30i")
+    parser.add_argument("--latency", type=float, default=0.0, help="seconds before each answer")
+    parser.add_argument("--stamp-macro", type=int, default=0)
+    parser.add_argument("--stamp-min", type=float, default=0.2)
+    parser.add_argument("--stamp-max", type=float, default=0.6)
+    parser.add_argument("--fill-macros", default="", help="give macros FIRST-LAST a value (pyfocas cannot read vacant ones)")
+    asyncio.run(serve(parser.parse_args()))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""The measuring subscriber: receipt times of Sparkplug messages, change-to-broker latency, node counters.
+
+Runs paho's network loop in a thread of the benchmark process (not the gateway's). For each DDATA it
+notes the receipt time; the stamp macro's value is the simulator's wall-clock time of the change, so
+receipt minus value is change-to-broker latency (both clocks are this host's). The first metric's
+timestamp (the CNC time the gateway stamped the tick with; clock offset 0) gives read-to-broker latency.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from typing import Any
+
+import paho.mqtt.client as paho
+from paho.mqtt.enums import CallbackAPIVersion
+
+from bench.simproc import stamp_latency
+from edge.publish.sparkplug_b_pb2 import Payload
+
+OVERRUNS_METRIC = "Gateway/PollOverruns"
+
+
+class LatencySubscriber:
+    """Subscribes to one Sparkplug group; `recording` decides whether latencies are kept."""
+
+    def __init__(self, host: str, port: int, group: str, stamp_metric: str) -> None:
+        self.group = group
+        self.stamp_metric = stamp_metric
+        self.recording = False
+        self.change_latency_s: list[float] = []
+        self.sample_latency_s: list[float] = []
+        self.births: set[str] = set()
+        self.deaths = 0
+        self.ddata = Counter[str]()
+        self.overruns: int | None = None
+        self._stamp_alias: dict[str, int] = {}
+        self._node_aliases: dict[int, str] = {}
+        self._lock = threading.Lock()
+        self._subscribed = threading.Event()
+        self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"bench-subscriber-{id(self)}")
+        self.client.on_connect = lambda c, *a: c.subscribe(f"spBv1.0/{group}/#", qos=0)
+        self.client.on_subscribe = lambda *a: self._subscribed.set()
+        self.client.on_message = self._on_message
+        self.client.connect(host, port, keepalive=30)
+        self.client.loop_start()
+        if not self._subscribed.wait(10):
+            self.close()
+            raise RuntimeError(f"subscriber could not subscribe on {host}:{port}")
+
+    def close(self) -> None:
+        self.client.loop_stop()
+        self.client.disconnect()
+
+    def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
+        received = time.time()
+        parts = message.topic.split("/")
+        if len(parts) < 4:
+            return
+        kind = parts[2]
+        if kind == "DDATA":
+            self._ddata(parts[4], message.payload, received)
+        elif kind == "DBIRTH":
+            self._dbirth(parts[4], message.payload)
+        elif kind in ("NBIRTH", "NDATA"):
+            self._node(kind, message.payload)
+        elif kind == "DDEATH":
+            self.deaths += 1
+
+    def _ddata(self, device: str, data: bytes, received: float) -> None:
+        self.ddata[device] += 1
+        if not self.recording:
+            return
+        payload = Payload.FromString(data)
+        metrics = payload.metrics
+        if not metrics:
+            return
+        sample = received - metrics[0].timestamp / 1000
+        stamp_alias = self._stamp_alias.get(device)
+        change = None
+        for metric in metrics:
+            if metric.alias == stamp_alias:
+                change = stamp_latency(metric.double_value, received)
+        with self._lock:
+            self.sample_latency_s.append(sample)
+            if change is not None:
+                self.change_latency_s.append(change)
+
+    def _dbirth(self, device: str, data: bytes) -> None:
+        payload = Payload.FromString(data)
+        for metric in payload.metrics:
+            if metric.name == self.stamp_metric:
+                self._stamp_alias[device] = metric.alias
+        with self._lock:
+            self.births.add(device)
+
+    def _node(self, kind: str, data: bytes) -> None:
+        payload = Payload.FromString(data)
+        for metric in payload.metrics:
+            if kind == "NBIRTH":
+                self._node_aliases[metric.alias] = metric.name
+            name = metric.name or self._node_aliases.get(metric.alias, "")
+            if name == OVERRUNS_METRIC:
+                self.overruns = int(metric.long_value)
+
+    def take(self) -> tuple[list[float], list[float]]:
+        """The latencies recorded so far (and forget them)."""
+        with self._lock:
+            change, sample = self.change_latency_s, self.sample_latency_s
+            self.change_latency_s, self.sample_latency_s = [], []
+        return change, sample

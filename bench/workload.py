@@ -1,0 +1,32 @@
+"""The realistic per-tick plan every benchmark shares: status group, 10 macros, 4 PMC ranges, clock.
+
+The same plan appears twice: as read items (codec and round-trip benchmarks) and as a daemon config
+section (fleet benchmark), so both measure the same work.
+"""
+
+from __future__ import annotations
+
+from edge.focas import items as it
+from edge.focas.model import PmcType
+
+MACRO_FIRST, MACRO_LAST = 500, 509
+STAMP_MACRO = 509  # the fleet simulator sets this one to its own wall-clock time (seconds mod 1000)
+PMC_RANGES = (("R", 100, 103, PmcType.BYTE), ("D", 2204, 2207, PmcType.WORD), ("G", 0, 7, PmcType.BYTE),
+              ("F", 0, 3, PmcType.BYTE))
+
+
+def tick_items() -> list[it.ReadItem]:
+    """One poll tick's reads, as the collector batches them for the plan below (16 native subpackets)."""
+    status: list[it.ReadItem] = [
+        it.ReadStatus(), it.ReadAlarmStatus(), it.ReadProgramNumber(), it.ReadSequenceNumber(), it.ReadFeed(),
+        it.ReadSpindleSpeed(), it.ReadSpindleLoad(), it.ReadPositions("absolute"), it.ReadParams(6711, 6711),
+    ]
+    pmc = [it.ReadPmc(area, start, end, dtype) for area, start, end, dtype in PMC_RANGES]
+    return [*status, it.ReadMacros(MACRO_FIRST, MACRO_LAST), *pmc, it.ReadClock()]
+
+
+def poll_section(period_s: float) -> str:
+    """The `poll:` YAML of one machine for the same plan, every group every `period_s`."""
+    pmc = ", ".join(f"{{range: {a}{s}-{a}{e}, data_type: {t.name.lower()}}}" for a, s, e, t in PMC_RANGES)
+    return (f"{{periods: {{status: {period_s}, macros: {period_s}, pmc: {period_s}}}, "
+            f"macros: [{MACRO_FIRST}-{MACRO_LAST}], pmc: [{pmc}]}}")

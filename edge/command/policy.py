@@ -1,0 +1,67 @@
+"""Whether a validated write may go to a machine: the master switch, the allow-list with its bounds,
+and the per-machine rate limit. Pure decisions; nothing here talks to a CNC.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+
+from edge.command.errors import CommandRefused, ErrorCode
+from edge.command.requests import WriteOp
+from edge.config import AllowRule, RateLimit, WritePolicy
+
+
+def authorise(op: WriteOp, policy: WritePolicy) -> None:
+    """Raise CommandRefused (disabled, not_allowed, out_of_bounds) unless the policy allows `op`."""
+    if not policy.enabled:
+        raise CommandRefused(ErrorCode.DISABLED, "writes are disabled for this machine "
+                             "(writes.enabled is false, or the machine's writes.enabled)")
+    covering = [rule for rule in policy.allow if rule.pattern.covers(op.target)]
+    if not covering:
+        raise CommandRefused(ErrorCode.NOT_ALLOWED, f"{op.target} is not covered by any writes.allow pattern")
+    values = numeric_values(op)
+    if any(all(_within(rule, v) for v in values) for rule in covering):
+        return
+    bounds = ", ".join(_describe(rule) for rule in covering)
+    shown = values[0] if len(values) == 1 else list(values)
+    raise CommandRefused(ErrorCode.OUT_OF_BOUNDS, f"{op.target}: value {shown} is outside {bounds}")
+
+
+def numeric_values(op: WriteOp) -> tuple[float, ...]:
+    """The value(s) a bound is checked against (a bit counts as 0 or 1)."""
+    if isinstance(op.value, tuple):
+        return tuple(float(v) for v in op.value)
+    return (float(op.value),)
+
+
+def _within(rule: AllowRule, value: float) -> bool:
+    return (rule.min is None or value >= rule.min) and (rule.max is None or value <= rule.max)
+
+
+def _describe(rule: AllowRule) -> str:
+    low = "-inf" if rule.min is None else f"{rule.min:g}"
+    high = "+inf" if rule.max is None else f"{rule.max:g}"
+    return f"{rule.target} [{low}..{high}]"
+
+
+class RateLimiter:
+    """At most `max_writes` writes per `per_s` seconds per machine (sliding window of admissions)."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._admitted: dict[str, deque[float]] = {}
+
+    def admit(self, machine_id: str, count: int, limit: RateLimit) -> None:
+        """Reserve `count` writes now, or raise CommandRefused(rate_limited) and reserve none."""
+        now = self._clock()
+        window = self._admitted.setdefault(machine_id, deque())
+        while window and window[0] <= now - limit.per_s:
+            window.popleft()
+        if len(window) + count > limit.max_writes:
+            retry = (window[0] + limit.per_s - now) if window else limit.per_s
+            raise CommandRefused(ErrorCode.RATE_LIMITED,
+                                 f"{len(window)} write(s) in the last {limit.per_s:g} s, {count} more would pass "
+                                 f"the limit of {limit.max_writes}; retry in {max(retry, 0.0):.1f} s")
+        window.extend([now] * count)

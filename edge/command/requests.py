@@ -1,0 +1,269 @@
+"""The JSON write request and the validated write it becomes, checked before anything reaches a CNC.
+
+    {"id": "42", "target": "pmc:R100.3", "value": true}          one write
+    [{"id": "a", "target": "macro:500", "value": 1.25}, {...}]   several, applied in order
+
+`WriteRequest` (pydantic) checks the shape, the target grammar (edge.targets, shared with the CLI and the
+allow-list) and that the value fits the target's type and width; it yields a `WriteOp`, the plain value
+the executor carries out. Every refusal has a reply code (edge.command.errors) as its pydantic error type.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    StrictInt,
+    StrictStr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+from edge.command.errors import CommandRefused, ErrorCode
+from edge.focas.model import PmcType
+from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_writable
+
+I32 = (-(2**31), 2**31 - 1)
+# A PMC element accepts its signed and its unsigned reading (0xFF and -1 are the same byte).
+PMC_INT_LIMITS = {PmcType.BYTE: (-(2**7), 2**8 - 1), PmcType.WORD: (-(2**15), 2**16 - 1),
+                  PmcType.LONG: (-(2**31), 2**32 - 1)}
+FLOAT32_MAX = 3.4028234663852886e38
+MAX_WRITES_PER_REQUEST = 64
+
+Scalar = StrictBool | StrictInt | StrictFloat
+WriteValue = float | bool | int | tuple[int | float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class WriteOp:
+    """One validated write. `value`: float (macro), bool (any bit), int|float (parameter), or a tuple of
+    elements (PMC, one per data_type element of the range)."""
+
+    target: WritableTarget
+    value: WriteValue
+
+    @property
+    def text(self) -> str:
+        return str(self.target)
+
+    def reply_value(self) -> object:
+        """The requested value as a reply or audit line shows it."""
+        if isinstance(self.value, tuple):
+            return self.value[0] if len(self.value) == 1 else list(self.value)
+        return self.value
+
+
+def _wrong(message: str) -> PydanticCustomError:
+    return PydanticCustomError(ErrorCode.WRONG_TYPE.value, message)
+
+
+def _number(what: str, raw: object) -> int | float:
+    if isinstance(raw, bool) or not isinstance(raw, int | float):
+        raise _wrong(f"{what}: expected a number, got {json.dumps(raw)}")
+    if isinstance(raw, float) and not math.isfinite(raw):
+        raise _wrong(f"{what}: expected a finite number, got {raw}")
+    return raw
+
+
+def _integer(what: str, raw: object) -> int:
+    value = _number(what, raw)
+    if isinstance(value, float):
+        if not value.is_integer():
+            raise _wrong(f"{what}: expected an integer, got {value}")
+        return int(value)
+    return value
+
+
+def _bit(what: str, raw: object) -> bool:
+    if isinstance(raw, bool):
+        return raw
+    if isinstance(raw, int | float) and raw in (0, 1):
+        return bool(raw)
+    raise _wrong(f"{what}: a bit takes true/false or 0/1, got {json.dumps(raw)}")
+
+
+def macro_value(target: MacroTarget, raw: object) -> float:
+    """A macro takes one finite number whose integer part fits the 32-bit scaled form."""
+    what = str(target)
+    if target.count != 1:
+        raise _wrong(f"{what}: write one macro at a time")
+    value = float(_number(what, raw))
+    if not I32[0] <= value <= I32[1]:
+        raise _wrong(f"{what}: {value} does not fit a macro's 32-bit scaled value "
+                     f"(|value| up to {I32[1]}; decimals beyond 32 bits are rounded)")
+    return value
+
+
+def pmc_elements(target: PmcTarget, raw: object) -> tuple[int | float, ...]:
+    """One element per data_type element of the range: a scalar for one, a list of exactly count."""
+    what = str(target)
+    parts = raw if isinstance(raw, list) else [raw]
+    if len(parts) != target.count:
+        raise _wrong(f"{what}: holds {target.count} {target.data_type.name.lower()} element(s), "
+                     f"got {len(parts)} value(s)")
+    kind = target.data_type
+    out: list[int | float] = []
+    for index, part in enumerate(parts):
+        where = f"{what} element {index}" if len(parts) > 1 else what
+        if kind in (PmcType.FLOAT, PmcType.DOUBLE):
+            number = float(_number(where, part))
+            if kind is PmcType.FLOAT and abs(number) > FLOAT32_MAX:
+                raise _wrong(f"{where}: {number} does not fit a 32-bit float")
+            out.append(number)
+            continue
+        integer = _integer(where, part)
+        low, high = PMC_INT_LIMITS[kind]
+        if not low <= integer <= high:
+            raise _wrong(f"{where}: {integer} does not fit a {kind.name.lower()} ({kind.width * 8} bits, "
+                         f"{low}..{high})")
+        out.append(integer)
+    return tuple(out)
+
+
+def pmc_bytes(target: PmcTarget, elements: tuple[int | float, ...]) -> bytes:
+    """Elements big-endian, the byte order the PMC read answers in (what you write is what you read)."""
+    kind = target.data_type
+    if kind is PmcType.FLOAT:
+        return struct.pack(f">{len(elements)}f", *elements)
+    if kind is PmcType.DOUBLE:
+        return struct.pack(f">{len(elements)}d", *elements)
+    width = kind.width
+    mask = (1 << (8 * width)) - 1
+    return b"".join((int(e) & mask).to_bytes(width, "big") for e in elements)
+
+
+def param_value(target: ParamTarget, raw: object) -> int | float:
+    """A whole parameter: a number; whether it fits is checked against the type the CNC reports."""
+    if target.last != target.first:
+        raise _wrong(f"{target}: write one parameter at a time")
+    return _number(str(target), raw)
+
+
+def make_op(target: WritableTarget, raw: object) -> WriteOp:
+    """The validated write of `raw` to `target`; PydanticCustomError(wrong_type) if it does not fit."""
+    if isinstance(target, MacroTarget):
+        return WriteOp(target, macro_value(target, raw))
+    if isinstance(target, PmcTarget):
+        if target.bit is not None:
+            return WriteOp(target, _bit(str(target), raw))
+        return WriteOp(target, pmc_elements(target, raw))
+    if target.bit is not None:
+        if target.last != target.first:
+            raise _wrong(f"{target}: a bit addresses one parameter")
+        return WriteOp(target, _bit(str(target), raw))
+    return WriteOp(target, param_value(target, raw))
+
+
+class WriteRequest(BaseModel):
+    """One write as it arrives on `<prefix>/<machine>/cmd`."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    id: StrictStr | StrictInt | None = None
+    target: str = Field(max_length=64)
+    value: Scalar | list[Scalar]
+    client: str | None = Field(default=None, max_length=128)  # self-declared, for the audit log
+
+    @field_validator("target")
+    @classmethod
+    def _grammar(cls, text: str) -> str:
+        try:
+            parse_writable(text)
+        except TargetError as exc:
+            raise PydanticCustomError(ErrorCode.INVALID_TARGET.value, str(exc)) from None
+        return text
+
+    @model_validator(mode="after")
+    def _fits(self) -> WriteRequest:
+        make_op(parse_writable(self.target), self.value)
+        return self
+
+    def op(self) -> WriteOp:
+        return make_op(parse_writable(self.target), self.value)
+
+
+@dataclass(frozen=True, slots=True)
+class RequestItem:
+    """One element of a request: its validated write, or why it was refused; id/client as sent."""
+
+    index: int
+    id: object
+    client: str | None
+    op: WriteOp | None
+    target_text: str | None
+    requested: object
+    refused: CommandRefused | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ParsedRequest:
+    items: tuple[RequestItem, ...]
+    is_list: bool
+
+
+def parse_request(payload: bytes, max_bytes: int) -> ParsedRequest:
+    """Bytes from the cmd topic -> items; a request-level problem raises CommandRefused."""
+    if len(payload) > max_bytes:
+        raise CommandRefused(ErrorCode.PAYLOAD_TOO_LARGE,
+                             f"request is {len(payload)} bytes; at most {max_bytes} are accepted")
+    try:
+        document = json.loads(payload.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CommandRefused(ErrorCode.MALFORMED, f"expected a UTF-8 JSON object or list: {exc}") from None
+    is_list = isinstance(document, list)
+    elements = document if is_list else [document]
+    if not elements:
+        raise CommandRefused(ErrorCode.MALFORMED, "expected at least one write, got an empty list")
+    if len(elements) > MAX_WRITES_PER_REQUEST:
+        raise CommandRefused(ErrorCode.MALFORMED,
+                             f"{len(elements)} writes in one request; at most {MAX_WRITES_PER_REQUEST}")
+    return ParsedRequest(tuple(parse_item(i, e) for i, e in enumerate(elements)), is_list)
+
+
+def parse_item(index: int, element: object) -> RequestItem:
+    """One element of a request, validated; a refusal is kept with the id it carried."""
+    fields: dict[str, Any] = element if isinstance(element, dict) else {}
+    request_id = fields.get("id") if isinstance(fields.get("id"), str | int) else None
+    client = fields.get("client") if isinstance(fields.get("client"), str) else None
+    target_text = fields.get("target") if isinstance(fields.get("target"), str) else None
+    requested = fields.get("value")
+    if not isinstance(element, dict):
+        refused = CommandRefused(ErrorCode.MALFORMED,
+                                 f"write {index}: expected an object with target and value, got "
+                                 f"{type(element).__name__}")
+        return RequestItem(index, None, None, None, None, None, refused)
+    try:
+        request = WriteRequest.model_validate(element)
+    except ValidationError as exc:
+        return RequestItem(index, request_id, client, None, target_text, requested, _refusal(index, exc))
+    return RequestItem(index, request.id, request.client, request.op(), request.target, request.value)
+
+
+_CODES = {code.value: code for code in ErrorCode}
+
+
+def _refusal(index: int, exc: ValidationError) -> CommandRefused:
+    """The first error decides the code; schema problems (missing, unknown key, not a scalar) are malformed."""
+    error = exc.errors()[0]
+    code = _CODES.get(error["type"], ErrorCode.MALFORMED)
+    loc = ".".join(str(part) for part in error["loc"])
+    message = str(error["msg"])
+    if error["type"] == "extra_forbidden":
+        message = "unknown key (expected id, target, value, client)"
+    elif error["type"] == "missing":
+        message = "required"
+    elif code is ErrorCode.MALFORMED and loc.startswith("value"):
+        code, message = ErrorCode.WRONG_TYPE, f"expected a number, a boolean or a list of them: {message}"
+        loc = "value"
+    return CommandRefused(code, f"write {index}" + (f" {loc}" if loc else "") + f": {message}")

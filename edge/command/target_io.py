@@ -1,0 +1,142 @@
+"""How each kind of write target is read, written and compared, over one CncSession.
+
+The session already holds the rules that must hold on every transport (PMC chunking over 32 bytes,
+read-modify-write of bits under a per-byte lock, bit parameters likewise, the scaled macro form); this
+module only picks the right call and says what "the target holds the requested value" means.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from edge.command.errors import CommandRefused, ErrorCode
+from edge.command.requests import I32, WriteOp, pmc_bytes
+from edge.focas import items as it
+from edge.focas.model import ParamRecord, ParamType
+from edge.focas.packed import to_scaled
+from edge.focas.session import CncSession
+from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
+
+# The value range each parameter type stores (BIT: the whole byte of 8 bits).
+PARAM_LIMITS = {ParamType.BIT: (0, 255), ParamType.BYTE: (-128, 255), ParamType.WORD: (-32768, 32767),
+                ParamType.TWO_WORD: I32}
+
+
+def read_item(target: WritableTarget) -> it.ReadItem:
+    """The read that shows what `target` holds (a bit: its byte or its parameter)."""
+    if isinstance(target, MacroTarget):
+        return it.ReadMacros(target.first, target.last)
+    if isinstance(target, PmcTarget):
+        return it.ReadPmc(target.area, target.start, target.end, target.data_type)
+    return it.ReadParams(target.first, target.first, target.axis)
+
+
+def current_value(target: WritableTarget, result: Any) -> object:
+    """What the target holds, from the result of read_item(target), in the shape a write takes."""
+    if isinstance(target, MacroTarget):
+        return result[0]
+    if isinstance(target, PmcTarget):
+        if target.bit is not None:
+            return bool((int(result[0]) >> target.bit) & 1)
+        return result[0] if len(result) == 1 else list(result)
+    record = param_record(target, result)
+    if target.bit is not None:
+        return bool((int(record.value or 0) >> target.bit) & 1)
+    return record.value
+
+
+def param_record(target: ParamTarget, result: Any) -> ParamRecord:
+    records = [r for r in result if isinstance(r, ParamRecord) and r.number == target.first]
+    if not records:
+        raise CommandRefused(ErrorCode.OUT_OF_RANGE, f"{target}: the CNC did not answer parameter {target.first}")
+    return records[0]
+
+
+def check_param(op: WriteOp, record: ParamRecord) -> None:
+    """The value must fit the parameter's type as the CNC reports it; a per-axis one needs its axis."""
+    target = op.target
+    assert isinstance(target, ParamTarget)
+    if record.axis == -1 and target.axis == 0:
+        raise CommandRefused(ErrorCode.INVALID_TARGET, f"{target}: parameter {target.first} is per axis; "
+                             f"address one axis, e.g. param:{target.first}/1")
+    if target.bit is not None:
+        if record.type != ParamType.BIT:
+            raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: parameter {target.first} is "
+                                 f"{_type_name(record.type)}, not a bit parameter; write the whole value")
+        return
+    value = op.value
+    assert isinstance(value, int | float) and not isinstance(value, bool)
+    if record.type == ParamType.REAL:
+        return
+    limits = PARAM_LIMITS.get(ParamType(record.type)) if record.type in tuple(ParamType) else None
+    if limits is None:
+        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: unknown parameter type {record.type}")
+    if float(value) != int(value):
+        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: parameter {target.first} is "
+                             f"{_type_name(record.type)}; {value} is not an integer")
+    if not limits[0] <= int(value) <= limits[1]:
+        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: parameter {target.first} is "
+                             f"{_type_name(record.type)}; {value} is outside {limits[0]}..{limits[1]}")
+
+
+def _type_name(ptype: int) -> str:
+    try:
+        return ParamType(ptype).name.lower().replace("_", "-")
+    except ValueError:
+        return f"type {ptype}"
+
+
+async def apply(session: CncSession, op: WriteOp) -> None:
+    """Send `op` through the session call for its kind."""
+    target, value = op.target, op.value
+    if isinstance(target, MacroTarget):
+        assert isinstance(value, float)
+        await session.write_macro(target.first, value)
+    elif isinstance(target, PmcTarget) and target.bit is not None:
+        await session.write_pmc_bit(target.area, target.start, target.bit, bool(value))
+    elif isinstance(target, PmcTarget):
+        assert isinstance(value, tuple)
+        await session.write_pmc(target.area, target.start, pmc_bytes(target, value))
+    elif target.bit is not None:
+        await session.write_param_bit(target.first, target.bit, bool(value), axis=target.axis)
+    else:
+        assert isinstance(value, int | float)
+        await session.write_param(target.first, value, axis=target.axis)
+
+
+def holds(op: WriteOp, current: object) -> bool:
+    """Whether `current` (as current_value gives it) is what `op` wrote."""
+    if isinstance(op.target, MacroTarget):
+        return isinstance(current, int | float) and _close(float(current), expected_macro(float(op.value))) \
+            if not isinstance(op.value, tuple) else False
+    if isinstance(op.value, bool) or op.target.bit is not None:
+        return current == bool(op.value)
+    if isinstance(op.value, tuple):
+        values = current if isinstance(current, list) else [current]
+        return len(values) == len(op.value) and all(
+            isinstance(c, int | float) and _same_element(op, float(c), float(w))
+            for c, w in zip(values, op.value, strict=True))
+    return isinstance(current, int | float) and _close(float(current), float(op.value))
+
+
+def expected_macro(value: float) -> float:
+    """The value a macro holds after writing `value`: the scaled form rounds digits beyond 32 bits."""
+    try:
+        mantissa, decimals = to_scaled(value)
+    except Exception:  # noqa: BLE001 - a value too large for the scaled form goes as a double
+        return value
+    return mantissa / 10**decimals
+
+
+def _same_element(op: WriteOp, current: float, written: float) -> bool:
+    target = op.target
+    assert isinstance(target, PmcTarget)
+    if target.data_type.width < 8 and target.data_type.name in ("BYTE", "WORD", "LONG"):
+        mask = (1 << (8 * target.data_type.width)) - 1
+        return (int(current) & mask) == (int(written) & mask)
+    return _close(current, written, rel=1e-6)
+
+
+def _close(a: float, b: float, rel: float = 1e-9) -> bool:
+    return math.isclose(a, b, rel_tol=rel, abs_tol=1e-9)

@@ -1,0 +1,70 @@
+"""Knowing what reached the broker: the outbox of unconfirmed live messages and the replay pacing.
+
+Sparkplug DATA and JSON state go out at QoS 0, so no PUBACK says they arrived. A QoS 1 *probe* published
+after them is a delivery barrier: the broker handles one connection's packets in order, so its PUBACK
+means everything sent before it arrived. Live batches wait in the outbox until a barrier confirms them;
+when a probe is not acknowledged in time, or the connection drops, the connection is *suspected dead* and
+the unconfirmed batches move to the disk spool, to be replayed (as historical) after the next births.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from edge.samples import Sample
+
+
+@dataclass(frozen=True, slots=True)
+class ForwardingPolicy:
+    """Delivery barrier and replay pacing (see docs/reliability.md)."""
+
+    probe_interval_s: float = 1.0  # how often unconfirmed live data is confirmed by a probe
+    probe_timeout_s: float = 5.0  # no PUBACK within this: the connection is suspected dead
+    replay_messages_per_s: float = 200.0  # historical messages per second, per format
+    replay_batch: int = 50  # spool rows per confirmed replay step
+
+    def __post_init__(self) -> None:
+        if min(self.probe_interval_s, self.probe_timeout_s, self.replay_messages_per_s) <= 0 \
+                or self.replay_batch < 1:
+            raise ValueError(f"forwarding policy: expected positive intervals, rate and batch, got {self}")
+
+
+@dataclass(frozen=True, slots=True)
+class HeldBatch:
+    """What the publisher hands the spool: one device's samples of one kind for one format."""
+
+    device_id: str
+    kind: str  # "data" | "events"
+    samples: Sequence[Sample]
+
+
+class Outbox:
+    """Live batches sent without acknowledgement, in send order, until a barrier confirms them."""
+
+    def __init__(self) -> None:
+        self._entries: list[tuple[int, HeldBatch]] = []
+        self._next = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def record(self, batch: HeldBatch) -> None:
+        self._entries.append((self._next, batch))
+        self._next += 1
+
+    def mark(self) -> int:
+        """A barrier position: everything recorded before this call."""
+        return self._next
+
+    def confirm(self, mark: int) -> int:
+        """Forget the batches recorded before `mark` (they reached the broker); how many went."""
+        keep = [e for e in self._entries if e[0] >= mark]
+        gone = len(self._entries) - len(keep)
+        self._entries = keep
+        return gone
+
+    def take_all(self) -> list[HeldBatch]:
+        """Every unconfirmed batch, oldest first, leaving the outbox empty (the connection is suspect)."""
+        entries, self._entries = self._entries, []
+        return [batch for _, batch in entries]

@@ -1,0 +1,297 @@
+"""The optional local HTTP endpoint: `/healthz` for a load balancer or a probe, `/metrics` for Prometheus.
+
+Off by default (`http: {enabled: true}` turns it on; it binds 127.0.0.1:9108 unless told otherwise).
+A tiny HTTP/1.1 server on the daemon's own event loop: a scrape reads the live poller and publisher
+state on the loop thread, so it needs no locks and never sees a half-updated counter. One request per
+connection (Connection: close), bounded header size and read time, GET and HEAD only.
+
+The metrics are built at scrape time by a custom collector on a private CollectorRegistry (nothing
+global, no default process metrics mixed in), and rendered by prometheus-client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from prometheus_client import CollectorRegistry
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily, Metric
+from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
+
+from edge import __version__
+
+log = logging.getLogger(__name__)
+
+REQUEST_TIMEOUT_S = 5.0
+MAX_HEADER_BYTES = 8192
+# Poll cycle wall time buckets (seconds): a LAN round trip is ~1-20 ms, a slow control 100 ms+.
+CYCLE_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
+_REASONS = {200: "OK", 404: "Not Found", 405: "Method Not Allowed", 400: "Bad Request", 503: "Service Unavailable"}
+
+
+class DaemonView(Protocol):
+    """What the endpoint reads from the daemon (edge.daemon.Daemon provides it)."""
+
+    @property
+    def pollers(self) -> Mapping[str, Any]: ...  # machine id -> MachinePoller
+
+    @property
+    def publisher(self) -> Any: ...
+
+    @property
+    def commands(self) -> Any: ...
+
+
+# ---- health ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Health:
+    ok: bool
+    broker_connected: bool
+    machines: int
+    machines_connected: int
+    healthy_share: float
+    reasons: tuple[str, ...] = ()
+
+    def document(self) -> dict[str, Any]:
+        return {"status": "ok" if self.ok else "unhealthy", "broker_connected": self.broker_connected,
+                "machines": self.machines, "machines_connected": self.machines_connected,
+                "healthy_share": self.healthy_share, "reasons": list(self.reasons)}
+
+
+def assess_health(daemon: DaemonView, healthy_share: float) -> Health:
+    """Healthy while the broker session is up and at least `healthy_share` of the machines are connected."""
+    broker = bool(daemon.publisher.connected)
+    total = len(daemon.pollers)
+    connected = sum(1 for poller in daemon.pollers.values() if poller.online)
+    reasons = []
+    if not broker:
+        reasons.append("the MQTT broker session is down")
+    share = connected / total if total else 1.0
+    if share < healthy_share:
+        down = sorted(mid for mid, poller in daemon.pollers.items() if not poller.online)
+        reasons.append(f"{connected} of {total} machine(s) connected, at least {healthy_share:.0%} required; "
+                       f"down: {', '.join(down)}")
+    return Health(not reasons, broker, total, connected, healthy_share, tuple(reasons))
+
+
+# ---- metrics --------------------------------------------------------------------------------------------
+
+
+def spool_depth(daemon: DaemonView) -> int:
+    """Samples waiting in the store-and-forward spool. Hook: the disk spool (another issue) exposes
+    `depth`; until then the spool drops what it cannot send and the depth is 0."""
+    depth = getattr(daemon.publisher.spool, "depth", 0)
+    return int(depth() if callable(depth) else depth)
+
+
+@dataclass
+class _CycleHistogram:
+    """A cumulative histogram fed from the poller's bounded window of recent cycle times.
+
+    `PollerStats.ticks` counts every recorded cycle, so the entries new since the last scrape are the
+    last (ticks - seen) of the window; if more than the window holds arrived in between, the oldest
+    are lost to the buckets (a scrape every few minutes at 4 ticks/s still sees them all).
+    """
+
+    owner: int = 0  # id() of the poller this history belongs to (a reload replaces the poller)
+    seen: int = 0
+    buckets: list[int] = field(default_factory=lambda: [0] * (len(CYCLE_BUCKETS) + 1))
+    total: float = 0.0
+
+    def update(self, ticks: int, window: list[float]) -> None:
+        new = min(max(ticks - self.seen, 0), len(window))
+        self.seen = ticks
+        for seconds in window[len(window) - new:] if new else ():
+            index = next((i for i, bound in enumerate(CYCLE_BUCKETS) if seconds <= bound), len(CYCLE_BUCKETS))
+            self.buckets[index] += 1
+            self.total += seconds
+
+    def cumulative(self) -> list[tuple[str, float]]:
+        running = 0
+        out = []
+        for bound, count in zip((*CYCLE_BUCKETS, float("inf")), self.buckets, strict=True):
+            running += count
+            out.append(("+Inf" if bound == float("inf") else repr(bound), float(running)))
+        return out
+
+
+class DaemonCollector:
+    """A prometheus-client collector that reads the daemon's live state at every scrape."""
+
+    def __init__(self, daemon: DaemonView) -> None:
+        self.daemon = daemon
+        self._cycles: dict[str, _CycleHistogram] = {}
+
+    def collect(self) -> Iterable[Metric]:
+        pollers = dict(self.daemon.pollers)
+        publisher = self.daemon.publisher
+        info = GaugeMetricFamily("focas_edge_info", "focas-edge build information", labels=["version"])
+        info.add_metric([__version__], 1)
+        yield info
+        broker = GaugeMetricFamily("focas_edge_broker_connected", "1 while the MQTT broker session is up")
+        broker.add_metric([], 1 if publisher.connected else 0)
+        yield broker
+        yield from self._machine_metrics(pollers)
+        yield from self._publish_metrics(publisher)
+        spool = GaugeMetricFamily("focas_edge_spool_depth", "samples waiting in the store-and-forward spool")
+        spool.add_metric([], spool_depth(self.daemon))
+        yield spool
+        writes = CounterMetricFamily("focas_edge_writes", "remote writes by outcome", labels=["outcome"])
+        for outcome, count in sorted(dict(getattr(self.daemon.commands, "counters", None) or {}).items()):
+            writes.add_metric([str(outcome)], float(count))
+        yield writes
+
+    def _machine_metrics(self, pollers: Mapping[str, Any]) -> Iterable[Metric]:
+        label = ["machine"]
+        connected = GaugeMetricFamily("focas_edge_machine_connected", "1 while the CNC session is up",
+                                      labels=label)
+        ticks = CounterMetricFamily("focas_edge_poll_ticks", "poll cycles completed", labels=label)
+        overruns = CounterMetricFamily("focas_edge_poll_overruns", "ticks that took longer than their period",
+                                       labels=label)
+        skipped = CounterMetricFamily("focas_edge_poll_skipped_ticks", "ticks skipped after an overrun",
+                                      labels=label)
+        errors = CounterMetricFamily("focas_edge_cnc_errors", "failed read items by EW code or error class",
+                                     labels=["machine", "code"])
+        skew = GaugeMetricFamily("focas_edge_clock_skew_seconds", "CNC clock minus gateway clock", labels=label)
+        cycle = HistogramMetricFamily("focas_edge_poll_cycle_seconds", "wall time of one poll cycle (one "
+                                      "batched request)", labels=label)
+        for machine_id, poller in sorted(pollers.items()):
+            stats = poller.stats
+            connected.add_metric([machine_id], 1 if poller.online else 0)
+            ticks.add_metric([machine_id], stats.ticks)
+            overruns.add_metric([machine_id], stats.overruns)
+            skipped.add_metric([machine_id], stats.skipped)
+            for code, count in sorted(stats.item_errors.items()):
+                errors.add_metric([machine_id, code], count)
+            skew_s = poller.clock.skew_s
+            if skew_s is not None:
+                skew.add_metric([machine_id], skew_s)
+            history = self._cycles.get(machine_id)
+            if history is None or history.owner != id(poller):
+                history = self._cycles[machine_id] = _CycleHistogram(owner=id(poller))
+            history.update(stats.ticks, stats.cycle_times)
+            cycle.add_metric([machine_id], history.cumulative(), history.total)
+        for gone in set(self._cycles) - set(pollers):
+            del self._cycles[gone]
+        yield from (connected, ticks, overruns, skipped, errors, skew, cycle)
+
+    def _publish_metrics(self, publisher: Any) -> Iterable[Metric]:
+        counters = dict(publisher.counters)
+        messages = CounterMetricFamily("focas_edge_mqtt_messages", "MQTT messages by outcome",
+                                       labels=["outcome"])
+        for outcome in ("published", "dropped"):
+            messages.add_metric([outcome], float(counters.pop(outcome, 0)))
+        yield messages
+        events = CounterMetricFamily("focas_edge_publisher_events", "publisher events (births, rebirths, "
+                                     "commands, connects, ...)", labels=["event"])
+        for name, count in sorted(counters.items()):
+            events.add_metric([name], float(count))
+        yield events
+
+
+def metrics_registry(daemon: DaemonView) -> CollectorRegistry:
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(DaemonCollector(daemon))
+    return registry
+
+
+# ---- the server -----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Response:
+    status: int
+    content_type: str
+    body: bytes
+
+
+class StatusServer:
+    """`await StatusServer(daemon, host, port, healthy_share).start()`; `await stop()` when done."""
+
+    def __init__(self, daemon: DaemonView, host: str = "127.0.0.1", port: int = 9108,
+                 healthy_share: float = 0.5) -> None:
+        self.daemon = daemon
+        self.host = host
+        self.requested_port = port
+        self.healthy_share = healthy_share
+        self.registry = metrics_registry(daemon)
+        self._server: asyncio.Server | None = None
+        self._connections: set[asyncio.Task[None]] = set()
+
+    @property
+    def port(self) -> int:
+        """The bound port (useful with port 0)."""
+        if self._server is None or not self._server.sockets:
+            return self.requested_port
+        return int(self._server.sockets[0].getsockname()[1])
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._serve, self.host, self.requested_port,
+                                                  limit=MAX_HEADER_BYTES)
+        log.info("status endpoint listening host=%s port=%d paths=/healthz,/metrics", self.host, self.port)
+
+    async def stop(self) -> None:
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        for task in list(self._connections):
+            task.cancel()
+        await asyncio.gather(*self._connections, return_exceptions=True)
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(server.wait_closed(), 2.0)
+
+    def respond(self, method: str, path: str) -> Response:
+        """The answer to one request (no I/O; the tests call it directly too)."""
+        if method not in ("GET", "HEAD"):
+            return _json(405, {"error": f"method {method} not allowed; expected GET or HEAD"})
+        route = path.split("?", 1)[0]
+        if route == "/healthz":
+            health = assess_health(self.daemon, self.healthy_share)
+            return _json(200 if health.ok else 503, health.document())
+        if route == "/metrics":
+            return Response(200, CONTENT_TYPE_LATEST, generate_latest(self.registry))
+        return _json(404, {"error": f"no such path {route!r}; expected /healthz or /metrics"})
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        self._connections.add(task)
+        try:
+            response, method = await self._answer(reader)
+            head = (f"HTTP/1.1 {response.status} {_REASONS.get(response.status, 'Status')}\r\n"
+                    f"Content-Type: {response.content_type}\r\nContent-Length: {len(response.body)}\r\n"
+                    "Connection: close\r\nCache-Control: no-store\r\n\r\n")
+            writer.write(head.encode("ascii") + (b"" if method == "HEAD" else response.body))
+            await asyncio.wait_for(writer.drain(), REQUEST_TIMEOUT_S)
+        except (OSError, TimeoutError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, ValueError):
+            pass  # the client went away or sent junk: nothing to answer
+        finally:
+            self._connections.discard(task)
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 1.0)
+
+    async def _answer(self, reader: asyncio.StreamReader) -> tuple[Response, str]:
+        head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), REQUEST_TIMEOUT_S)
+        request_line = head.split(b"\r\n", 1)[0].decode("latin-1")
+        parts = request_line.split()
+        if len(parts) != 3 or not parts[2].startswith("HTTP/"):
+            return _json(400, {"error": f"expected 'METHOD PATH HTTP/1.x', got {request_line[:80]!r}"}), "GET"
+        method, path = parts[0], parts[1]
+        try:
+            return self.respond(method, path), method
+        except Exception as exc:  # a broken scrape must not take the daemon down
+            log.exception("status endpoint failed path=%s", path)
+            return _json(503, {"error": f"internal error: {exc!r}"}), method
+
+
+def _json(status: int, document: dict[str, Any]) -> Response:
+    return Response(status, "application/json", json.dumps(document).encode() + b"\n")
