@@ -695,7 +695,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
         config = Config.model_validate(data)
     except ValidationError as exc:
         found = format_errors(exc)
-        found += [p for p in _duplicate_ids(data) if p not in found]
+        found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data)) if p not in found]
         raise ConfigError(found, source) from None
     problems: list[str] = []
     try:
@@ -835,6 +835,19 @@ def _duplicate_ids(data: dict[str, Any]) -> Iterator[str]:
                    " (device ids are unique per edge node, ignoring case)")
         else:
             seen[machine_id.lower()] = index
+
+
+def _mqtt_cross_checks(data: dict[str, Any]) -> Iterator[str]:
+    """Rules between mqtt keys, re-checked on the raw data: pydantic skips model validators when any
+    field of the section is invalid, and a bad file must show every problem at once."""
+    mqtt = data.get("mqtt")
+    if not isinstance(mqtt, dict):
+        return
+    formats = mqtt.get("formats", list(FORMATS))
+    if isinstance(formats, list) and "sparkplug" in formats and mqtt.get("sparkplug") is None:
+        yield "mqtt.sparkplug: required (group_id, edge_node_id) when formats includes sparkplug"
+    if mqtt.get("password_env") and mqtt.get("password_file"):
+        yield "mqtt.password_file: give password_env or password_file, not both"
 
 
 def _strip_quote(message: str) -> str:

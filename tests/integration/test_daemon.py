@@ -195,3 +195,21 @@ async def test_birth_carries_static_identity(mosquitto: Mosquitto, observer: Obs
     assert metrics["Device/Model"].string_value.startswith("16i")
     assert metrics["Device/MaxAxis"].int_value == 8
     assert not metrics["Device/Model"].is_null
+
+
+def test_run_refuses_a_bad_config_listing_every_problem(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from edge.cli import main
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("""
+mqtt: {host: 127.0.0.1, port: 99999, formats: [sparkplug], password: hunter2}
+machines:
+  - {id: m1, host: 127.0.0.1, timezone: Mars/Olympus}
+  - {id: m1, host: 127.0.0.1, poll: {pmc: [{range: R103-R100}]}}
+""")
+    assert main(["run", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    for fragment in ("mqtt.port", "mqtt.password", "mqtt.sparkplug", "machines[0].timezone", "machines[1].id",
+                     "machines[1].poll.pmc[0]"):
+        assert fragment in err, (fragment, err)
+    assert "hunter2" not in err  # a secret is never echoed
