@@ -308,15 +308,25 @@ class MacroRange(_Model):
 
 
 class PmcRange(_Model):
-    """PMC bytes of one area read as typed elements, one metric per element (`PMC/D2204`)."""
+    """PMC bytes of one area read as typed elements, one metric per element (`PMC/D2204`); with
+    data_type `bit`, one Boolean metric per bit (`PMC/R100.3`), the bytes read in one range read."""
 
     area: str | None = None
     range: str | None = None
     start: int | None = Field(default=None, ge=0)
     end: int | None = Field(default=None, ge=0)
-    data_type: Literal["byte", "word", "long", "float", "double"] = "byte"
+    data_type: Literal["bit", "byte", "word", "long", "float", "double"] = "byte"
     name: MetricName | None = None
     deadband: float = Field(default=0.0, ge=0)
+
+    @property
+    def bits(self) -> bool:
+        return self.data_type == "bit"
+
+    @property
+    def element_type(self) -> str:
+        """The element width the range is read with (bits are read as their bytes)."""
+        return "byte" if self.bits else self.data_type
 
     @field_validator("area")
     @classmethod
@@ -352,6 +362,8 @@ class PmcRange(_Model):
             raise _at("area", "required with start/end (one of G F Y X A R T K C D M N E Z)")
         try:
             self.target  # noqa: B018 - validates the whole-element rule with the data type
+            if self.bits and self.deadband:
+                raise ValueError("a deadband means nothing for bits")
         except ValueError as exc:
             raise _at("range" if self.range is not None else "end", _strip_quote(str(exc))) from None
         if self.name is not None:
@@ -376,17 +388,17 @@ class PmcRange(_Model):
 
     @property
     def pmc_type(self) -> PmcType:
-        return PMC_TYPE_NAMES[self.data_type]
+        return PMC_TYPE_NAMES[self.element_type]
 
     @property
     def target(self) -> PmcTarget:
         """The range as a PMC target (byte addresses, inclusive)."""
         if self.range is not None:
-            return self._parse(self.range, self.area, self.data_type)
+            return self._parse(self.range, self.area, self.element_type)
         assert self.area is not None and self.start is not None
         last = self.end if self.end is not None else self.start
         text = f"pmc:{self.area}{self.start}" + (f"-{self.area}{last}" if self.end is not None else "")
-        target = parse_target(f"{text}.{self.data_type}")
+        target = parse_target(f"{text}.{self.element_type}")
         assert isinstance(target, PmcTarget)
         return target
 
@@ -395,11 +407,19 @@ class PmcRange(_Model):
         target = self.target
         return list(range(target.start, target.end + 1, target.data_type.width))
 
-    def metric_name(self, address: int) -> str:
+    def metric_name(self, address: int, bit: int | None = None) -> str:
         target = self.target
+        element = f"{target.area}{address}" + (f".{bit}" if bit is not None else "")
         if self.name is None:
-            return f"PMC/{target.area}{address}"
-        return self.name if len(self.addresses()) == 1 else f"{self.name}/{target.area}{address}"
+            return f"PMC/{element}"
+        single = len(self.addresses()) == 1 and bit is None
+        return self.name if single else f"{self.name}/{element}"
+
+    def metric_names(self) -> list[str]:
+        """One name per element, or per bit (bit 0 first) of each byte for data_type bit."""
+        if self.bits:
+            return [self.metric_name(a, b) for a in self.addresses() for b in range(8)]
+        return [self.metric_name(a) for a in self.addresses()]
 
 
 class NumberedItem(_Model):

@@ -22,6 +22,7 @@ from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
+from edge.publish.spool import open_spool
 from edge.samples import MetricType, Sample
 from edge.sdnotify import SystemdNotifier
 from edge.status_http import StatusServer
@@ -72,7 +73,8 @@ class Daemon:
         self.session_factory = session_factory
         self.notifier = notifier or SystemdNotifier()
         self.state_dir = config.resolved_state_dir
-        self.publisher = Publisher(publish_settings(config))
+        self.spool = open_spool(self.state_dir, int(config.spool.max_bytes), config.spool.max_age_s)
+        self.publisher = Publisher(publish_settings(config), spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
         self.commands = CommandService(config, self.publisher, self.pollers)
         self.publisher.on_device_command = self.commands.on_device_command
@@ -131,6 +133,7 @@ class Daemon:
         await asyncio.gather(*tasks, return_exceptions=True)
         with contextlib.suppress(Exception):
             await self.publisher.stop()
+        self.spool.close()  # after the publisher spooled what it could not confirm
         await asyncio.gather(*(p.close() for p in self.pollers.values()), return_exceptions=True)
         self._tasks.clear()
         if self.status_http is not None:
@@ -248,6 +251,9 @@ class Daemon:
             ("Gateway/MessagesPublished", published, MetricType.INT64),
             ("Gateway/UptimeSeconds", int(time.monotonic() - self._started), MetricType.INT64),
         ]
+        writes = self.commands.counters
+        values += [(f"Writes/{name}", int(writes.get(key, 0)), MetricType.INT64)
+                   for name, key in (("Ok", "writes_ok"), ("Failed", "writes_failed"), ("Refused", "writes_refused"))]
         return [Sample(name, value, kind, now) for name, value, kind in values]
 
     async def _node_metrics_loop(self) -> None:

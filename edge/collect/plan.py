@@ -115,6 +115,7 @@ class PlannedRead:
     item: it.ReadItem
     metrics: tuple[MetricSpec, ...]
     deadbands: tuple[float, ...] = ()
+    bits: bool = False  # a PMC byte range published bit by bit (bit 0 first)
 
     def deadband_map(self) -> dict[str, float]:
         return {m.name: d for m, d in zip(self.metrics, self.deadbands, strict=False) if d}
@@ -225,10 +226,10 @@ def _pmc_reads(machine: MachineConfig) -> list[PlannedRead]:
     reads = []
     for pmc in machine.poll.pmc:
         target = pmc.target
-        specs = tuple(MetricSpec(pmc.metric_name(a), PMC_METRIC_TYPES[target.data_type], writable=True)
-                      for a in pmc.addresses())
+        kind = MetricType.BOOLEAN if pmc.bits else PMC_METRIC_TYPES[target.data_type]
+        specs = tuple(MetricSpec(name, kind, writable=True) for name in pmc.metric_names())
         item = it.ReadPmc(target.area, target.start, target.end, target.data_type)
-        reads.append(PlannedRead(Group.PMC, item, specs, (pmc.deadband,) * len(specs)))
+        reads.append(PlannedRead(Group.PMC, item, specs, (pmc.deadband,) * len(specs), bits=pmc.bits))
     return reads
 
 
@@ -251,6 +252,8 @@ def _numbered_reads(machine: MachineConfig) -> list[PlannedRead]:
 def metric_values(read: PlannedRead, result: object) -> list[tuple[MetricSpec, object]]:
     """The (metric, value) pairs one successful read result gives, for the metrics the read declares."""
     values = _extract(read.item, result)
+    if read.bits:
+        values = [bool(int(byte) >> bit & 1) for byte in values for bit in range(8)]  # type: ignore[call-overload]
     return [(spec, _coerce(spec, value)) for spec, value in zip(read.metrics, values, strict=False)]
 
 

@@ -13,12 +13,13 @@ from typing import Any
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import I32, WriteOp, pmc_bytes
 from edge.focas import items as it
-from edge.focas.model import ParamRecord, ParamType
+from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.packed import to_scaled
 from edge.focas.session import CncSession
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 # The value range each parameter type stores (BIT: the whole byte of 8 bits).
+INTEGER_PMC_TYPES = (PmcType.BYTE, PmcType.WORD, PmcType.LONG)
 PARAM_LIMITS = {ParamType.BIT: (0, 255), ParamType.BYTE: (-128, 255), ParamType.WORD: (-32768, 32767),
                 ParamType.TWO_WORD: I32}
 
@@ -107,35 +108,37 @@ async def apply(session: CncSession, op: WriteOp) -> None:
 
 def holds(op: WriteOp, current: object) -> bool:
     """Whether `current` (as current_value gives it) is what `op` wrote."""
-    if isinstance(op.target, MacroTarget):
-        return isinstance(current, int | float) and _close(float(current), expected_macro(float(op.value))) \
-            if not isinstance(op.value, tuple) else False
-    if isinstance(op.value, bool) or op.target.bit is not None:
-        return current == bool(op.value)
-    if isinstance(op.value, tuple):
+    value = op.value
+    if isinstance(value, bool):
+        return current is value
+    if isinstance(value, tuple):
         values = current if isinstance(current, list) else [current]
-        return len(values) == len(op.value) and all(
-            isinstance(c, int | float) and _same_element(op, float(c), float(w))
-            for c, w in zip(values, op.value, strict=True))
-    return isinstance(current, int | float) and _close(float(current), float(op.value))
+        return len(values) == len(value) and all(
+            _same_element(op.target, c, float(w)) for c, w in zip(values, value, strict=True))
+    if not isinstance(current, int | float):
+        return False
+    if isinstance(op.target, MacroTarget):
+        return _close(float(current), expected_macro(value))
+    return _close(float(current), float(value))
 
 
 def expected_macro(value: float) -> float:
     """The value a macro holds after writing `value`: the scaled form rounds digits beyond 32 bits."""
     try:
         mantissa, decimals = to_scaled(value)
-    except Exception:  # noqa: BLE001 - a value too large for the scaled form goes as a double
+    except Exception:  # a value too large for the scaled form goes as a double
         return value
     return mantissa / 10**decimals
 
 
-def _same_element(op: WriteOp, current: float, written: float) -> bool:
-    target = op.target
-    assert isinstance(target, PmcTarget)
-    if target.data_type.width < 8 and target.data_type.name in ("BYTE", "WORD", "LONG"):
+def _same_element(target: WritableTarget, current: object, written: float) -> bool:
+    """PMC integers compare as bytes (0xFF == -1 in a byte); floats as float32/64 round trip."""
+    if not isinstance(current, int | float) or not isinstance(target, PmcTarget):
+        return False
+    if target.data_type in INTEGER_PMC_TYPES:
         mask = (1 << (8 * target.data_type.width)) - 1
         return (int(current) & mask) == (int(written) & mask)
-    return _close(current, written, rel=1e-6)
+    return _close(float(current), written, rel=1e-6)
 
 
 def _close(a: float, b: float, rel: float = 1e-9) -> bool:

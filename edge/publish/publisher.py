@@ -324,7 +324,7 @@ class Publisher:
             if conn is not None and conn.connected:
                 self._send_json(conn, self._topics.machine_status(device_id, False))
 
-    async def publish_json_reply(self, device_id: str, payload: dict[str, Any],
+    async def publish_json_reply(self, device_id: str, payload: dict[str, Any] | list[dict[str, Any]],
                                  source: CommandSource) -> None:
         """A command reply: to the MQTT 5 response topic (with correlation data) or `<machine>/cmd/reply`."""
         if self._topics is None or self._json is None:

@@ -148,3 +148,18 @@ def test_static_is_due_once_per_connection() -> None:
     assert Group.STATIC not in schedule.due(1.0)
     schedule.start(5.0)  # reconnected
     assert Group.STATIC in schedule.due(5.0)
+
+
+def test_pmc_bit_range_publishes_one_boolean_per_bit() -> None:
+    from edge.collect.plan import Group, MachinePlan, metric_values
+    from edge.config import AlarmsConfig, MachineConfig
+    from edge.samples import MetricType
+
+    machine = MachineConfig.model_validate(
+        {"id": "m", "host": "h", "poll": {"pmc": [{"range": "R100-R101", "data_type": "bit"}]}})
+    plan = MachinePlan.build(machine, AlarmsConfig())
+    (read,) = plan.reads_for({Group.PMC})
+    assert [m.name for m in read.metrics] == [f"PMC/R{a}.{b}" for a in (100, 101) for b in range(8)]
+    assert {m.type for m in read.metrics} == {MetricType.BOOLEAN} and all(m.writable for m in read.metrics)
+    values = [v for _, v in metric_values(read, [0b0000_1001, 0b1000_0000])]
+    assert values == [True, False, False, True, False, False, False, False] + [False] * 7 + [True]
