@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 
 from bench.report import Check, Result
@@ -110,9 +111,10 @@ def run(quick: bool = False, repeats: int = 5) -> Result:
     for count in (25, 200):
         batches = [_tick_samples(count, tick) for tick in range(8)]
         node = _sparkplug_node(batches[0])
-        turn = iter(range(1 << 62))
+        turns = iter(range(1 << 62))
 
-        def encode(node: SparkplugNode = node, batches: list[list[Sample]] = batches) -> object:
+        def encode(node: SparkplugNode = node, batches: list[list[Sample]] = batches,
+                   turn: Iterator[int] = turns) -> object:
             return node.device_data("m1", batches[next(turn) % 8])
 
         rate = measure_rate(encode, count, seconds, repeats)

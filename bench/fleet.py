@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import shutil
 import statistics
+import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
@@ -37,7 +38,9 @@ class FleetOptions:
     period_s: float = 0.1
     duration_s: float = 20.0
     warmup_s: float = 3.0
-    profile_to: Path | None = None
+    profile_to: Path | None = None  # pyinstrument over the whole run (main thread only)
+    spy_to: Path | None = None  # py-spy collapsed stacks of the measuring window (all threads)
+    py_spy: str = "py-spy"
 
 
 def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float) -> str:
@@ -89,15 +92,16 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         return measured
     finally:
         if daemon is not None:
-            code = daemon.stop()
+            code = daemon.stop(timeout=15)
             if code not in (0, None) and options.profile_to is None:
-                print(f"warning: daemon exit code {code}; log kept in {workdir}")
+                print(f"warning: daemon exit code {code} (not stopped by SIGTERM within 15 s, killed)")
         for sim in sims:
             sim.stop()
         if subscriber is not None:
             subscriber.close()
         broker.close()
-        shutil.rmtree(workdir, ignore_errors=True)
+        if options.profile_to is None:
+            shutil.rmtree(workdir, ignore_errors=True)
 
 
 def _split(count: int, parts: int) -> list[range]:
@@ -114,6 +118,12 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     sims_before = [sim.stats() for sim in sims]
     cpu_before = daemon.cpu_seconds()
     broker_before = _cpu(broker)
+    spy = None
+    if options.spy_to is not None:
+        spy = subprocess.Popen([options.py_spy, "record", "--pid", str(daemon.proc.pid), "--rate", "250",
+                                "--duration", str(int(options.duration_s)), "--format", "raw", "--threads",
+                                "--nonblocking", "-o", str(options.spy_to)],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     started = time.monotonic()
     rss: list[int] = []
     while time.monotonic() - started < options.duration_s:
@@ -125,6 +135,8 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     subscriber.recording = False
     rss.append(daemon.rss_bytes())
     system_cpu = psutil.cpu_percent(None)
+    if spy is not None:
+        spy.wait(30)
     change, sample = subscriber.take()
     cycles = sum(a["data_pdus"] - b["data_pdus"] for a, b in zip(sims_after, sims_before, strict=True))
     sim_cpu = sum(a["cpu_s"] - b["cpu_s"] for a, b in zip(sims_after, sims_before, strict=True))
@@ -175,17 +187,18 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, duration_s: float | None = None,
-        profile_to: Path | None = None) -> Result:
+        spy_to: Path | None = None, py_spy: str = "py-spy") -> Result:
     sizes = sizes or ([5, 20] if quick else [10, 50, 100, 200])
     duration = duration_s or (5.0 if quick else 20.0)
     repeats = 1 if quick else repeats
-    command = "python -m bench fleet" + (" --quick" if quick else "") + \
-        (f" --sizes {','.join(map(str, sizes))}" if sizes else "") + f" --repeat {repeats} --duration {duration:g}"
+    command = (f"python -m bench fleet{' --quick' if quick else ''} --sizes {','.join(map(str, sizes))} "
+               f"--repeat {repeats} --duration {duration:g}")
     result = Result("fleet", command)
     by_size: dict[int, dict[str, Any]] = {}
     for n in sizes:
-        runs = [run_fleet(FleetOptions(n, duration_s=duration, warmup_s=1.0 if quick else 3.0, profile_to=profile_to))
-                for _ in range(repeats)]
+        runs = [run_fleet(FleetOptions(n, duration_s=duration, warmup_s=1.0 if quick else 3.0,
+                                       spy_to=spy_to if n == max(sizes) and i == 0 else None, py_spy=py_spy))
+                for i in range(repeats)]
         by_size[n] = summarise(runs)
         result.rows.append(by_size[n])
         print(f"  fleet N={n}: {by_size[n]['cpu_us_per_cycle']:.0f} us/cycle, "

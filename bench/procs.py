@@ -25,16 +25,19 @@ class SimProcess:
     """`python -m bench.simproc` as a child: ports once ready, stats on request."""
 
     def __init__(self, machines: int, *, latency: float = 0.0, stamp_macro: int = 0, fill_macros: str = "",
-                 timeout: float = 60.0) -> None:
+                 packed: bool = False, timeout: float = 60.0) -> None:
         command = [sys.executable, "-m", "bench.simproc", "--machines", str(machines), "--latency", str(latency)]
         if stamp_macro:
             command += ["--stamp-macro", str(stamp_macro)]
         if fill_macros:
             command += ["--fill-macros", fill_macros]
+        if packed:
+            command.append("--packed")
         self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                      cwd=REPO, env=python_env())
         first = self._line(timeout)
         self.ports: list[int] = first["ports"]
+        self.packed_ports: list[int | None] = first.get("packed_ports", [])
         self.process = psutil.Process(self.proc.pid)
 
     def _line(self, timeout: float) -> dict[str, Any]:
@@ -70,8 +73,7 @@ class DaemonProcess:
         if profile_to is None:
             command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
         else:
-            command = [sys.executable, "-m", "pyinstrument", "--renderer", "text", "--show-all",
-                       "-o", str(profile_to), "-m", "edge", "run", "--config", str(config)]
+            command = [sys.executable, "-m", "bench.profiled_daemon", str(config), str(profile_to)]
         self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
         self.proc = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, cwd=REPO,
                                      env=python_env())

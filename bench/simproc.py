@@ -60,15 +60,17 @@ def stats(fleet: Fleet) -> dict[str, float]:
 
 async def serve(args: argparse.Namespace) -> None:
     first, _, last = args.fill_macros.partition("-") if args.fill_macros else ("", "", "")
-    macros = ({n: float(n) + 0.5 for n in range(int(first), int(last or first) + 1)} if first else {})
+    numbers = range(int(first), int(last or first) + 1) if first else range(0)
+    macros: dict[int, float | None] = {n: float(n) + 0.5 for n in numbers}
     specs = [MachineSpec(profile=args.profile, macros=macros, faults={"latency": args.latency},
                          cycle=CycleSpec(alarm_every=0)) for _ in range(args.machines)]
-    fleet = Fleet(specs, base_port=0)
+    fleet = Fleet(specs, base_port=0, packed_base_port=0 if args.packed else None)
     await fleet.start()
     stamper = None
     if args.stamp_macro:
         stamper = asyncio.create_task(stamp_changes(fleet, args.stamp_macro, args.stamp_min, args.stamp_max))
-    print(json.dumps({"ports": [m.port for m in fleet], "pid": os.getpid()}), flush=True)
+    print(json.dumps({"ports": [m.port for m in fleet], "packed_ports": [m.packed_port for m in fleet],
+                      "pid": os.getpid()}), flush=True)
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader()
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
@@ -95,7 +97,9 @@ def main() -> None:
     parser.add_argument("--stamp-macro", type=int, default=0)
     parser.add_argument("--stamp-min", type=float, default=0.2)
     parser.add_argument("--stamp-max", type=float, default=0.6)
-    parser.add_argument("--fill-macros", default="", help="give macros FIRST-LAST a value (pyfocas cannot read vacant ones)")
+    parser.add_argument("--packed", action="store_true", help="also serve the packed surface")
+    parser.add_argument("--fill-macros", default="",
+                        help="give macros FIRST-LAST a value (pyfocas cannot read vacant ones)")
     asyncio.run(serve(parser.parse_args()))
 
 

@@ -59,12 +59,13 @@ class LatencySubscriber:
         if len(parts) < 4:
             return
         kind = parts[2]
+        data = bytes(message.payload)
         if kind == "DDATA":
-            self._ddata(parts[4], message.payload, received)
+            self._ddata(parts[4], data, received)
         elif kind == "DBIRTH":
-            self._dbirth(parts[4], message.payload)
+            self._dbirth(parts[4], data)
         elif kind in ("NBIRTH", "NDATA"):
-            self._node(kind, message.payload)
+            self._node(kind, data)
         elif kind == "DDEATH":
             self.deaths += 1
 

@@ -56,10 +56,13 @@ class DaemonProcess:
         self.proc: asyncio.subprocess.Process | None = None
 
     async def start(self) -> None:
-        with open(self.log, "wb") as log:
+        log = self.log.open("wb")  # the child keeps its own copy of the descriptor
+        try:
             self.proc = await asyncio.create_subprocess_exec(
                 *focas_edge_command(), "--log-level", "INFO", "run", "--config", str(self.config),
                 stdout=log, stderr=log, env=self.env)
+        finally:
+            log.close()
 
     @property
     def pid(self) -> int:

@@ -1,0 +1,76 @@
+"""`python -m bench [name ...] [--quick] [--repeat N]`: run benchmarks, print tables, save JSON.
+
+Names: codec, roundtrip, fleet, writes (default: all, in that order). Results go to bench/results/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+
+from bench import codec, fleet, roundtrip, writes
+from bench.report import Result, machine_info, render, save
+
+BENCHMARKS = ("codec", "roundtrip", "fleet", "writes")
+
+
+def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
+    sizes = [int(n) for n in args.sizes.split(",")] if args.sizes else None
+    spy = Path(args.spy) if args.spy else None
+
+    def run_fleet() -> Result:
+        result = fleet.run(quick=args.quick, sizes=sizes, repeats=args.repeat, duration_s=args.duration,
+                           spy_to=spy, py_spy=args.py_spy)
+        return result
+
+    return {
+        "codec": lambda: codec.run(quick=args.quick, repeats=max(args.repeat, 3)),
+        "roundtrip": lambda: roundtrip.run(quick=args.quick, latency_s=args.latency),
+        "fleet": run_fleet,
+        "writes": lambda: writes.run(quick=args.quick),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("names", nargs="*", help=f"benchmarks to run: {', '.join(BENCHMARKS)} (default all)")
+    parser.add_argument("--quick", action="store_true", help="small sizes and short runs (a smoke run)")
+    parser.add_argument("--repeat", type=int, default=2, help="repeat each fleet size this often (default 2)")
+    parser.add_argument("--sizes", default="", help="fleet sizes, comma separated (default 10,50,100,200)")
+    parser.add_argument("--duration", type=float, default=None, help="fleet measuring window, seconds")
+    parser.add_argument("--latency", type=float, default=roundtrip.LATENCY_S,
+                        help="simulated per-request latency for roundtrip, seconds (default 0.002)")
+    parser.add_argument("--spy", default="", metavar="FILE",
+                        help="fleet: record py-spy collapsed stacks of the daemon during the window into FILE "
+                             "(the largest size wins); summarise with python -m bench.profile_summary FILE")
+    parser.add_argument("--py-spy", default="py-spy", help="the py-spy executable")
+    parser.add_argument("--results", type=Path, default=None, help="directory for JSON results")
+    args = parser.parse_args(argv)
+    names = args.names or list(BENCHMARKS)
+    unknown = [n for n in names if n not in BENCHMARKS]
+    if unknown:
+        parser.error(f"unknown benchmark(s) {unknown}; expected some of {', '.join(BENCHMARKS)}")
+    machine = machine_info()
+    print(f"machine: {machine['cpu']}, {machine['cores']} cores, Python {machine['python']}, "
+          f"load {machine['loadavg_1m']}", flush=True)
+    table = runners(args)
+    failed = False
+    for name in names:
+        try:
+            result = table[name]()
+        except Exception:
+            traceback.print_exc()
+            result = Result(name, "python -m bench " + name, status="failed",
+                            notes=[traceback.format_exc().strip().splitlines()[-1]])
+            failed = True
+        print(render(result), flush=True)
+        path = save(result, machine, args.results) if args.results else save(result, machine)
+        print(f"saved {path}\n", flush=True)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""The daemon under soak, in its own process so its RSS, descriptors and threads are its own.
+
+    python -m tests.soak.child CONFIG KEYS_FILE
+
+Every sample the pollers hand the publisher is appended to KEYS_FILE (one JSON line each: the consumer's
+dedup key), written at once so the record costs the daemon no memory. Every few seconds one JSON line of
+self-measurements goes to stdout. SIGTERM stops the daemon cleanly.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO
+
+from edge.config import load_config
+from edge.daemon import Daemon
+from edge.samples import Sample
+
+REPORT_EVERY_S = 5.0
+
+
+def rss_bytes() -> int:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+def spy(daemon: Daemon, out: IO[str]) -> None:
+    publisher = daemon.publisher
+    data, send_events = publisher.device_data, publisher.device_events
+
+    def record(device_id: str, samples: Sequence[Sample]) -> None:
+        for s in samples:
+            out.write(json.dumps([device_id, s.name, s.timestamp_ms, s.value], default=str) + "\n")
+
+    async def device_data(device_id: str, samples: Sequence[Sample]) -> None:
+        record(device_id, samples)
+        await data(device_id, samples)
+
+    async def device_events(device_id: str, events: Sequence[Sample]) -> None:
+        record(device_id, events)
+        await send_events(device_id, events)
+
+    publisher.device_data = device_data  # type: ignore[method-assign]
+    publisher.device_events = device_events  # type: ignore[method-assign]
+
+
+async def report(daemon: Daemon, started: float) -> None:
+    while True:
+        counters = daemon.publisher.counters
+        line = {"t": round(time.monotonic() - started, 1), "rss": rss_bytes(),
+                "fds": len(os.listdir("/proc/self/fd")), "threads": threading.active_count(),
+                "tasks": len(asyncio.all_tasks()), "spool_rows": counters.get("spool_rows", 0),
+                "unconfirmed": counters.get("unconfirmed_batches", 0),
+                "suspect_dead": counters.get("suspect_dead", 0), "replayed_rows": counters.get("replayed_rows", 0),
+                "samples_dropped": counters.get("samples_dropped", 0),
+                "online": sum(1 for p in daemon.pollers.values() if p.online), "born": daemon.publisher.ready}
+        print(json.dumps(line), flush=True)
+        await asyncio.sleep(REPORT_EVERY_S)
+
+
+async def main(config: Path, keys: Path) -> int:
+    with keys.open("a", buffering=1 << 16) as out:
+        daemon = Daemon(load_config(config), config)
+        spy(daemon, out)
+        reporter = asyncio.create_task(report(daemon, time.monotonic()))
+        try:
+            return await daemon.run()
+        finally:
+            reporter.cancel()
+            out.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(asyncio.run(main(Path(sys.argv[1]), Path(sys.argv[2]))))

@@ -1,0 +1,65 @@
+"""Every benchmark runs end to end at its smallest size, so the harness never rots (no speed assertions)."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from bench import codec, fleet, roundtrip, writes
+from bench.__main__ import main
+from bench.report import percentile
+from bench.simproc import stamp_latency, stamp_value
+from bench.timing import Rate, measure_rate
+from tests.helpers import mosquitto_binary
+
+needs_broker = pytest.mark.skipif(mosquitto_binary() is None, reason="mosquitto is not installed")
+
+
+def _one_shot(call: Callable[[], object], units_per_call: int, seconds: float = 1.0, repeats: int = 5) -> Rate:
+    return measure_rate(call, units_per_call, seconds=0.001, repeats=1)
+
+
+def test_stamp_latency_survives_the_modulo_wrap() -> None:
+    assert stamp_latency(stamp_value(1_700_000_999.990), 1_700_001_000.040) == pytest.approx(0.05, abs=1e-3)
+    assert percentile([3.0, 1.0, 2.0], 50) == 2.0 and math.isnan(percentile([], 99))
+
+
+def test_codec_rows_cover_every_codec(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(codec, "measure_rate", _one_shot)
+    result = codec.run(quick=True)
+    cases = " ".join(row["case"] for row in result.rows)
+    for word in ("frame decode", "frame build", "8-byte", "ODBALMHIS", "Sparkplug", "change detection"):
+        assert word in cases
+    assert all(row["best/s"] > 0 for row in result.rows)
+
+
+def test_roundtrip_batches_one_pdu_and_compares_three_clients() -> None:
+    result = roundtrip.run(quick=True, ks=[1, 4], cycles=2, latency_s=0.001)
+    _, k4 = result.rows
+    assert k4["PDUs"] == 1 and k4["per_item_ms"] > k4["batched_ms"]
+    assert k4["pyfocas_ms"] is not None
+
+
+@needs_broker
+def test_fleet_measures_cpu_cycles_and_latency() -> None:
+    row = fleet.run_fleet(fleet.FleetOptions(2, duration_s=1.5, warmup_s=0.2))
+    assert row["cycles_per_s"] > 0 and row["rss_mb"] > 0
+    assert row["cpu_us_per_cycle"] > 0 and not math.isnan(row["sample_p50_ms"])
+
+
+@needs_broker
+def test_writes_reports_latency_or_pending() -> None:
+    result = writes.run(quick=True, writes=2)
+    assert result.status in ("ok", "pending")
+    assert result.rows or result.notes
+
+
+def test_cli_saves_json(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(codec, "measure_rate", _one_shot)
+    assert main(["codec", "--quick", "--results", str(tmp_path)]) == 0
+    saved = json.loads((tmp_path / "codec.json").read_text())
+    assert saved["machine"]["cores"] and saved["rows"] and saved["checks"]

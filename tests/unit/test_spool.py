@@ -1,0 +1,180 @@
+"""The disk spool: order, bounds and drop policy, durability across kill -9, and the outbox."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from edge.publish.forwarding import ForwardingPolicy, HeldBatch, Outbox
+from edge.publish.spool import DiskSpool, decode_samples, encode_samples
+from edge.samples import MetricType, Quality, Sample
+
+
+def sample(i: int, name: str = "Macro/500", value: object = None) -> Sample:
+    return Sample(name, float(i) if value is None else value, MetricType.DOUBLE, 1_700_000_000_000 + i)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_rows_come_back_oldest_first_per_format_and_leave_on_ack(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    for i in range(5):
+        spool.hold("sparkplug", "m1", "data", [sample(i)])
+        spool.hold("json", "m1", "data", [sample(i)])
+    spool.hold("sparkplug", "m2", "events", [sample(9, "Alarm/Event", "x")])
+    first = spool.oldest("sparkplug", 3)
+    assert [e.samples[0].value for e in first] == [0.0, 1.0, 2.0]
+    assert [e.id for e in first] == sorted(e.id for e in first)
+    assert spool.pending("sparkplug") == 6 and spool.pending("json") == 5
+    spool.ack([e.id for e in first])
+    rest = spool.oldest("sparkplug", 10)
+    assert [e.samples[0].value for e in rest] == [3.0, 4.0, "x"]
+    assert rest[-1].kind == "events" and rest[-1].device_id == "m2"
+    assert [e.device_id for e in spool.oldest("sparkplug", 10, devices={"m2"})] == ["m2"]
+    assert spool.oldest("sparkplug", 10, devices=set()) == []
+    spool.close()
+
+
+def test_rows_survive_reopen_and_ids_keep_growing(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    spool = DiskSpool(path)
+    spool.hold("json", "m1", "data", [sample(1)])
+    spool.ack([spool.oldest("json", 1)[0].id])
+    spool.hold("json", "m1", "data", [sample(2)])
+    last_id = spool.oldest("json", 1)[0].id
+    spool.close()
+    again = DiskSpool(path)
+    assert again.pending() == 1 and again.bytes > 0
+    again.hold("json", "m1", "data", [sample(3)])
+    ids = [e.id for e in again.oldest("json", 10)]
+    assert ids[0] == last_id and ids[1] > last_id  # AUTOINCREMENT: a replayed id is never reused
+    again.close()
+
+
+def test_size_bound_drops_oldest_data_before_any_event(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite", max_bytes=4000)
+    spool.hold("sparkplug", "m1", "events", [sample(0, "Alarm/Event", "raised")])
+    for i in range(1, 200):
+        spool.hold("sparkplug", "m1", "data", [sample(i, value="v" * 40)])
+    assert spool.bytes <= 4000
+    assert spool.dropped > 0
+    left = spool.oldest("sparkplug", 1000)
+    assert left[0].kind == "events"  # the alarm event outlived older data
+    values = [e.samples[0].timestamp_ms for e in left[1:]]
+    assert values == sorted(values) and values[-1] == 1_700_000_000_000 + 199  # the newest data kept
+    assert spool.dropped + len(left) == 200
+    spool.close()
+
+
+def test_only_events_left_then_oldest_event_goes(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite", max_bytes=1000)
+    for i in range(100):
+        spool.hold("json", "m1", "events", [sample(i, "Alarm/Event", "e" * 30)])
+    left = spool.oldest("json", 1000)
+    assert left and spool.bytes <= 1000
+    assert left[-1].samples[0].timestamp_ms == 1_700_000_000_000 + 99
+    assert spool.dropped == 100 - len(left)
+    spool.close()
+
+
+def test_age_bound_drops_old_rows_and_counts_them(tmp_path: Path) -> None:
+    clock = Clock()
+    spool = DiskSpool(tmp_path / "s.sqlite", max_age_s=60, clock=clock)
+    spool.hold("sparkplug", "m1", "data", [sample(1), sample(2)])
+    clock.now += 30
+    spool.hold("sparkplug", "m1", "data", [sample(3)])
+    clock.now += 40  # the first row is 70 s old now
+    assert [s.value for e in spool.oldest("sparkplug", 10) for s in e.samples] == [3.0]
+    assert spool.dropped == 2
+    spool.close()
+
+
+def test_unreadable_row_is_dropped_not_blocking(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    spool.hold("json", "m1", "data", [sample(1)])
+    spool.hold("json", "m1", "data", [sample(2)])
+    first = spool.oldest("json", 1)[0].id
+    db = spool._conn()
+    db.execute("UPDATE spool SET body = ? WHERE id = ?", (b"\xff not json", first))
+    assert [s.value for e in spool.oldest("json", 10) for s in e.samples] == [2.0]
+    assert spool.dropped == 1
+    spool.close()
+
+
+def test_bad_bounds_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="max_bytes"):
+        DiskSpool(tmp_path / "s.sqlite", max_bytes=0)
+
+
+CHILD = """
+import sys, os, signal
+from pathlib import Path
+from edge.publish.spool import DiskSpool
+from edge.samples import Sample, MetricType
+spool = DiskSpool(Path(sys.argv[1]))
+for i in range(int(sys.argv[2])):
+    spool.hold("sparkplug", "m1", "data", [Sample("Macro/1", i, MetricType.INT32, i)])
+print("held", flush=True)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_kill_9_after_hold_loses_nothing(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(path), "300"], capture_output=True, timeout=60,
+                          cwd=Path(__file__).parents[2], env={**os.environ, "PYTHONPATH": "."})
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    assert b"held" in proc.stdout
+    spool = DiskSpool(path)
+    values = [s.value for e in spool.oldest("sparkplug", 1000) for s in e.samples]
+    assert values == list(range(300))
+    spool.close()
+
+
+values = st.one_of(st.none(), st.booleans(), st.integers(-(2**63), 2**64 - 1), st.text(),
+                   st.floats(allow_nan=False))
+
+
+@given(st.lists(st.tuples(st.text(min_size=1), values, st.sampled_from(list(MetricType)),
+                          st.integers(0, 2**48), st.sampled_from(list(Quality))), max_size=20))
+def test_encode_decode_round_trip_property(rows: list[tuple[str, object, MetricType, int, Quality]]) -> None:
+    samples = [Sample(*row) for row in rows]
+    assert decode_samples(encode_samples(samples)) == samples
+
+
+@given(st.binary(max_size=200))
+def test_decode_garbage_raises_value_error_only_fuzz(body: bytes) -> None:
+    with contextlib.suppress(ValueError):
+        decode_samples(body)
+
+
+def test_outbox_confirms_up_to_the_mark_and_gives_back_the_rest() -> None:
+    outbox = Outbox()
+    batches = [HeldBatch("m1", "data", [sample(i)]) for i in range(4)]
+    outbox.record(batches[0])
+    outbox.record(batches[1])
+    mark = outbox.mark()
+    outbox.record(batches[2])
+    assert outbox.confirm(mark) == 2
+    outbox.record(batches[3])
+    assert outbox.take_all() == batches[2:]
+    assert len(outbox) == 0
+
+
+def test_forwarding_policy_validates() -> None:
+    with pytest.raises(ValueError, match="positive"):
+        ForwardingPolicy(probe_timeout_s=0)
