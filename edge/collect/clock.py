@@ -67,7 +67,11 @@ class ClockTracker:
         self.zone = zone if isinstance(zone, ZoneInfo) else ZoneInfo(zone)
         self.max_skew_s = max_skew_s
         self.window_s = window_s
-        self._readings: deque[_Reading] = deque(maxlen=MAX_READINGS)
+        self._readings: deque[_Reading] = deque()
+        # Sliding-window extremes in amortised O(1) per tick (a poll loop calls observe at 10 Hz):
+        # readings whose `lower` decreases (front = max) and whose `upper` increases (front = min).
+        self._max_lower: deque[_Reading] = deque()
+        self._min_upper: deque[_Reading] = deque()
         self._low = float("-inf")
         self._high = float("inf")
         self._skew: float | None = None
@@ -85,10 +89,11 @@ class ClockTracker:
         """
         base = cnc_to_utc_seconds(cnc_wall, self.zone) - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
-        self._readings.append(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic))
-        while self._readings and gateway_monotonic - self._readings[0].monotonic > self.window_s:
-            self._readings.popleft()
-        self._recompute()
+        self._add(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic))
+        while self._readings and (len(self._readings) > MAX_READINGS
+                                  or gateway_monotonic - self._readings[0].monotonic > self.window_s):
+            self._evict_oldest()
+        self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
         if self._low >= self._high:
             # Inconsistent with the window: the CNC clock jumped (or drifted). Keep the newest
             # readings that still agree with each other and drop the older ones.
@@ -107,9 +112,32 @@ class ClockTracker:
         self._skew = gateway_monotonic + offset - gateway_wall
         return self._judge()
 
+    def _add(self, reading: _Reading) -> None:
+        self._readings.append(reading)
+        while self._max_lower and self._max_lower[-1].lower <= reading.lower:
+            self._max_lower.pop()
+        self._max_lower.append(reading)
+        while self._min_upper and self._min_upper[-1].upper >= reading.upper:
+            self._min_upper.pop()
+        self._min_upper.append(reading)
+
+    def _evict_oldest(self) -> None:
+        oldest = self._readings.popleft()
+        if self._max_lower and self._max_lower[0] is oldest:
+            self._max_lower.popleft()
+        if self._min_upper and self._min_upper[0] is oldest:
+            self._min_upper.popleft()
+
     def _recompute(self) -> None:
-        self._low = max(r.lower for r in self._readings)
-        self._high = min(r.upper for r in self._readings)
+        """Rebuild the window extremes from scratch (after the window was rebuilt on a clock jump)."""
+        readings = list(self._readings)
+        self._readings.clear()
+        self._max_lower.clear()
+        self._min_upper.clear()
+        for reading in readings:
+            self._add(reading)
+        self._low = self._max_lower[0].lower
+        self._high = self._min_upper[0].upper
 
     def _judge(self) -> ClockTransition | None:
         assert self._skew is not None
@@ -163,6 +191,8 @@ class ClockTracker:
     def reset(self) -> None:
         """Forget every reading (a different CNC behind the same address, or a clock set on purpose)."""
         self._readings.clear()
+        self._max_lower.clear()
+        self._min_upper.clear()
         self._low, self._high = float("-inf"), float("inf")
         self._skew = None
         self._use_gateway = True
