@@ -53,7 +53,10 @@ class ChangeDetector:
     def _differs(self, previous: Sample, sample: Sample) -> bool:
         if previous.quality != sample.quality or previous.type != sample.type:
             return True
-        return values_differ(previous.value, sample.value, self._deadbands.get(sample.name, 0.0))
+        old, new = previous.value, sample.value
+        if old == new and type(old) is type(new):  # the common case on a poll tick: nothing moved
+            return False
+        return values_differ(old, new, self._deadbands.get(sample.name, 0.0))
 
 
 def values_differ(old: object, new: object, deadband: float = 0.0) -> bool:
