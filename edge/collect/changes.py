@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
-from edge.samples import Quality, Sample
+from edge.samples import MetricType, Quality, Sample
 
 
 class ChangeDetector:
@@ -40,23 +40,27 @@ class ChangeDetector:
 
     def offer(self, sample: Sample) -> bool:
         """True (and remember it) if `sample` differs enough from the last reported one."""
-        previous = self._reported.get(sample.name)
-        if previous is not None and not self._differs(previous, sample):
+        if not self.would_report(sample.name, sample.value, sample.quality, sample.type):
             return False
         self._reported[sample.name] = sample
         return True
 
+    def would_report(self, name: str, value: object, quality: Quality, kind: MetricType) -> bool:
+        """Whether a value would be reported, without remembering it (lets the poller build a Sample
+        only for what changed: most values of a tick do not)."""
+        previous = self._reported.get(name)
+        if previous is None:
+            return True
+        if previous.quality != quality or previous.type != kind:
+            return True
+        old = previous.value
+        if old == value and type(old) is type(value):  # the common case on a poll tick: nothing moved
+            return False
+        return values_differ(old, value, self._deadbands.get(name, 0.0))
+
     def last_reported(self) -> dict[str, Sample]:
         """The current picture as subscribers know it (for births after a rebirth request)."""
         return dict(self._reported)
-
-    def _differs(self, previous: Sample, sample: Sample) -> bool:
-        if previous.quality != sample.quality or previous.type != sample.type:
-            return True
-        old, new = previous.value, sample.value
-        if old == new and type(old) is type(new):  # the common case on a poll tick: nothing moved
-            return False
-        return values_differ(old, new, self._deadbands.get(sample.name, 0.0))
 
 
 def values_differ(old: object, new: object, deadband: float = 0.0) -> bool:

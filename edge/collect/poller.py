@@ -276,6 +276,7 @@ class MachinePoller:
         samples: list[Sample] = []
         events: list[Sample] = []
         alarm_status: int | None = None
+        would_report = self._changes.would_report
         history: list[AlarmHistoryEntry] | None = None
         for read, result in zip(reads, results, strict=False):
             if isinstance(result, FocasError):
@@ -287,8 +288,10 @@ class MachinePoller:
                 history = list(result)
                 continue
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
+            # Only what the change detector would report becomes a Sample (most values do not move).
             samples.extend(Sample(spec.name, value, spec.type, timestamp)
-                           for spec, value in pl.metric_values(read, result))
+                           for spec, value in pl.metric_values(read, result)
+                           if would_report(spec.name, value, Quality.GOOD, spec.type))
         samples.extend(self._clock_samples(timestamp))
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
