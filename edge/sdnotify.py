@@ -41,7 +41,10 @@ class SystemdNotifier:
             target = "\0" + target[1:]  # abstract namespace socket
         try:
             if self._socket is None:
-                self._socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+                # Non-blocking: a datagram socket whose reader lags (queue full) must never stall the event
+                # loop the daemon runs on; a notification that cannot be queued is logged and dropped.
+                self._socket = socket.socket(socket.AF_UNIX,
+                                             socket.SOCK_DGRAM | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
             self._socket.sendto("\n".join(fields).encode(), target)
             return True
         except OSError as exc:

@@ -40,11 +40,11 @@ class SparkplugDecoder:
 
     def lines(self, topic: str, data: bytes) -> list[str]:
         parts = topic.split("/")
+        if len(parts) == 3 and parts[:2] == ["spBv1.0", "STATE"]:  # Sparkplug 3.0: spBv1.0/STATE/<host_id>
+            return [f"STATE  host={parts[2]} {data.decode(errors='replace')}"]
         if len(parts) < 4 or parts[0] != "spBv1.0":
             return []
         kind = parts[2]
-        if parts[1] == "STATE":
-            return [f"STATE  host={parts[2]} {data.decode(errors='replace')}"]
         node = tuple(parts[1:2] + parts[3:4])
         device = parts[4] if len(parts) > 4 else ""
         key = (*node, device)

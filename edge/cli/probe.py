@@ -31,8 +31,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                "reached or was lost during the probe, 2 bad usage.",
     )
     parser.add_argument("address", metavar="HOST[:PORT]",
-                        help="CNC address: host, host:port (default port 8193), tcp:host:port, or unix:/path "
-                             "(packed transport only)")
+                        help="CNC address: host, host:port (default port 8193; packed 18193), tcp:host:port, "
+                             "or unix:/path (packed transport only)")
     parser.add_argument("--transport", choices=("focas", "packed"), default="focas",
                         help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",

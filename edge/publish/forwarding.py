@@ -21,11 +21,11 @@ class ForwardingPolicy:
 
     probe_interval_s: float = 1.0  # how often unconfirmed live data is confirmed by a probe
     probe_timeout_s: float = 5.0  # no PUBACK within this: the connection is suspected dead
-    replay_messages_per_s: float = 200.0  # historical messages per second, per format
+    replay_rows_per_s: float = 100.0  # spool rows (one tick of one machine) replayed per second, per format
     replay_batch: int = 50  # spool rows per confirmed replay step
 
     def __post_init__(self) -> None:
-        if min(self.probe_interval_s, self.probe_timeout_s, self.replay_messages_per_s) <= 0 \
+        if min(self.probe_interval_s, self.probe_timeout_s, self.replay_rows_per_s) <= 0 \
                 or self.replay_batch < 1:
             raise ValueError(f"forwarding policy: expected positive intervals, rate and batch, got {self}")
 

@@ -677,7 +677,7 @@ class Publisher:
         """Oldest first, paced, each row as its own historical message(s); rows acked after a barrier."""
         spool = self.spool
         assert isinstance(spool, ReplaySpool)
-        pause = 1.0 / self.forwarding.replay_messages_per_s
+        pause = 1.0 / self.forwarding.replay_rows_per_s
         started = time.monotonic()
         sent_rows = 0
 
@@ -694,7 +694,11 @@ class Publisher:
                     self._replay_again[fmt] = False
                     continue
                 break
+            done: list[int] = []
             for entry in entries:
+                if fmt == "sparkplug" and not self._node.is_online(entry.device_id):
+                    continue  # went offline since the query: its rows wait for its next DBIRTH
+                done.append(entry.id)
                 for m in self._historical_messages(fmt, entry):
                     if not current():
                         return
@@ -703,12 +707,12 @@ class Publisher:
                         self._suspect_dead(fmt, conn, "replay publish refused by the MQTT client")
                         return
                     self._counters["replayed_messages"] += 1
-                    await asyncio.sleep(pause)
+                await asyncio.sleep(pause)  # per row: a tick's worth of one machine
             if not current() or not await self._barrier(fmt, conn):
                 return
-            spool.ack([e.id for e in entries])
-            self._counters["replayed_rows"] += len(entries)
-            sent_rows += len(entries)
+            spool.ack(done)
+            self._counters["replayed_rows"] += len(done)
+            sent_rows += len(done)
         if sent_rows:
             log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
                      time.monotonic() - started, spool.pending(fmt))

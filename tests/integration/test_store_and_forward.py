@@ -43,7 +43,7 @@ pytestmark = pytest.mark.integration
 
 OUTAGE_S = float(os.environ.get("DRILL_OUTAGE_S", "6"))
 MACHINES = 5
-FAST = ForwardingPolicy(probe_interval_s=0.3, probe_timeout_s=1.5, replay_messages_per_s=500)
+FAST = ForwardingPolicy(probe_interval_s=0.3, probe_timeout_s=1.5, replay_rows_per_s=200)
 
 
 def config_text(host: str, port: int, state_dir: Path, fleet: Fleet, sparkplug_extra: str = "") -> str:
@@ -218,8 +218,9 @@ async def test_primary_host_offline_spools_and_replays_after_online(
     try:
         await all_born(observer)
         await observer.wait_count("DDATA", 20, timeout=15)
-        collected.phase = "down"
         await observer.publish(state, json.dumps({"online": False, "timestamp": t0 + 1}).encode(), retain=True)
+        await async_wait_for(lambda: daemon.publisher.session_state != "born", timeout=10, message="NDEATH")
+        collected.phase = "down"  # from here on nothing may go out live
         await async_wait_for(lambda: daemon.spool.pending("sparkplug") > 10, timeout=15,
                              message="spooling while the host is offline")
         assert len(observer.of("NBIRTH")) == 1

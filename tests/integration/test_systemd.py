@@ -234,6 +234,7 @@ async def test_watchdog_is_withheld_while_a_poll_loop_is_wedged(
         return client
 
     def withheld() -> int:
+        notify.drain()
         return sum(1 for r in caplog.records if "watchdog withheld" in r.getMessage())
 
     try:
@@ -258,3 +259,30 @@ async def test_watchdog_is_withheld_while_a_poll_loop_is_wedged(
                 assert await asyncio.wait_for(task, 15) == 0
     finally:
         notify.close()
+
+
+def test_notifier_never_blocks_when_the_reader_lags(tmp_path: Path) -> None:
+    """A full datagram queue (systemd busy) drops the notification instead of stalling the event loop."""
+    notify = NotifySocket(tmp_path / "notify.sock")
+    notifier = SystemdNotifier(str(notify.path))
+    try:
+        sent = [notifier.watchdog() for _ in range(500)]  # far beyond the default queue length (10)
+        assert sent[0] is True and sent[-1] is False
+        assert 0 < notify.count("WATCHDOG=1") < 500
+        assert notifier.watchdog() is True  # the queue drained: notifications flow again
+    finally:
+        notifier.close()
+        notify.close()
+
+
+async def test_bad_config_exits_2_which_the_unit_does_not_restart(tmp_path: Path) -> None:
+    config = tmp_path / "edge.yaml"
+    config.write_text("mqtt: {host: localhost, port: 0}\nmachines: []\n")
+    daemon = DaemonProcess(config)
+    try:
+        await daemon.start()
+        assert await daemon.wait(30) == 2, daemon.output()
+    finally:
+        await daemon.kill()
+    assert "machines" in daemon.output()
+    assert values(unit_entries(UNIT.read_text()), "Service", "RestartPreventExitStatus") == ["2"]
