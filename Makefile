@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check
+.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check venv
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ sim: $(STAMP)
 bench: $(STAMP) broker-check
 	$(PY) -m bench
 
+## make soak: 20 simulated machines with random faults (SOAK_SECONDS, default 600); fails on loss or growth
+soak: $(STAMP) broker-check
+	$(PY) -m tests.soak
+
+## make fuzz: the property tests with 20,000 examples each (minutes, not part of make test)
 fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q tests -k "property or fuzz"
 

@@ -251,6 +251,8 @@ class Daemon:
             ("Gateway/MessagesPublished", published, MetricType.INT64),
             ("Gateway/UptimeSeconds", int(time.monotonic() - self._started), MetricType.INT64),
         ]
+        values += [("Spool/Depth", self.spool.pending(), MetricType.INT64),
+                   ("Spool/Dropped", self.spool.dropped, MetricType.INT64)]
         writes = self.commands.counters
         values += [(f"Writes/{name}", int(writes.get(key, 0)), MetricType.INT64)
                    for name, key in (("Ok", "writes_ok"), ("Failed", "writes_failed"), ("Refused", "writes_refused"))]

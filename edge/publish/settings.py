@@ -39,6 +39,6 @@ class PublishSettings:
     json_prefix: str = "focas"
     state_dir: Path = Path("state")
     reconnect_min_s: float = 0.5  # first retry delay; doubles per failed attempt
-    reconnect_max_s: float = 30.0  # cap of the retry delay (jitter: each delay is drawn in [d/2, d])
+    reconnect_max_s: float = 10.0  # cap of the retry delay (jitter: each delay is drawn in [d/2, d])
     rebirth_min_interval_s: float = 1.0  # rebirth requests inside this window after a rebirth coalesce
     connect_timeout_s: float = 10.0  # SUBACK wait before a session is considered broken
