@@ -17,7 +17,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser = subparsers.add_parser(
         "run", help="run the collector daemon",
         description="Poll every configured CNC and publish what changes to MQTT (Sparkplug B 3.0 and/or JSON). "
-                    "SIGTERM stops cleanly (DDEATH, NDEATH, close PDUs); SIGHUP reloads the config file.")
+                    "SIGTERM stops cleanly (DDEATH, NDEATH, close PDUs); SIGHUP reloads the config file. Under "
+                    "systemd (Type=notify) it sends READY=1 once started and WATCHDOG=1 only while every poll loop "
+                    "makes progress. With http.enabled in the config, /healthz and /metrics (Prometheus) are "
+                    "served on http.host:http.port. See docs/config.md and docs/install.md.",
+        epilog="Exit codes: 0 stopped by SIGTERM/SIGINT, 2 bad config (every problem listed; not restarted by "
+               "the systemd unit), other non-zero an unexpected failure.")
     parser.add_argument("--config", "-c", type=Path, default=Path("/etc/focas-edge/edge.yaml"),
                         help="the YAML config file (default /etc/focas-edge/edge.yaml)")
     parser.set_defaults(func=handle)

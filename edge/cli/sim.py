@@ -24,7 +24,10 @@ from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "sim", help="run simulated CNCs (native FOCAS/Ethernet, optionally the packed surface)",
-        description="Run simulated FANUC CNCs on consecutive ports until Ctrl-C or SIGTERM.")
+        description="Run simulated FANUC CNCs on consecutive ports until Ctrl-C or SIGTERM. See docs/simulator.md "
+                    "for profiles, faults, the admin endpoint and scenario files.",
+        epilog="Exit codes: 0 stopped by Ctrl-C or SIGTERM, 1 a port could not be bound, 2 bad usage or a bad "
+               "scenario file.")
     parser.add_argument("--machines", type=int, default=None, metavar="N", help="how many (default 1)")
     parser.add_argument("--port", type=int, default=None, metavar="PORT",
                         help="native FOCAS port of the first machine; the next ones follow (default 8193; "

@@ -12,7 +12,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "watch", help="print decoded Sparkplug B and JSON messages as they arrive",
         description="Subscribe to a broker and print every focas-edge message readably: Sparkplug payloads are "
                     "decoded (aliases resolved from the births), JSON values shown with their quality and "
-                    "CNC timestamp. Ctrl-C stops.")
+                    "CNC timestamp. Ctrl-C stops.",
+        epilog="Exit codes: 0 stopped by Ctrl-C or SIGTERM, 2 bad usage. An unreachable broker is retried, "
+               "not an error.")
     parser.add_argument("--host", default="127.0.0.1", help="broker host (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=1883, help="broker port (default 1883)")
     parser.add_argument("--group", default="+", help="Sparkplug group id to watch (default: all)")
