@@ -85,11 +85,9 @@ class Mosquitto:
 
     def start(self, timeout: float = 10.0) -> None:
         assert self.proc is None or self.proc.poll() is not None, "broker already running"
-        self.proc = subprocess.Popen(
-            [self.binary, "-c", str(self.conf)],
-            stdout=subprocess.DEVNULL,
-            stderr=open(self._dir / "stderr.log", "ab"),  # noqa: SIM115
-        )
+        with open(self._dir / "stderr.log", "ab") as log:  # the child keeps its own copy of the fd
+            self.proc = subprocess.Popen([self.binary, "-c", str(self.conf)], stdout=subprocess.DEVNULL,
+                                         stderr=log)
         wait_for(lambda: port_open(self.host, self.port), timeout, message=f"mosquitto on {self.port}")
 
     def stop(self, kill: bool = False) -> None:

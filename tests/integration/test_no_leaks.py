@@ -4,6 +4,7 @@ descriptors, asyncio tasks and threads are back to their starting counts."""
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
 import os
 import threading
@@ -25,6 +26,7 @@ MQTT_EVERY = 10  # every 10th cycle also drops both MQTT connections
 
 
 def counts() -> dict[str, int]:
+    gc.collect()  # unreferenced file objects (of earlier tests too) close now, not at a random later point
     return {"fds": len(os.listdir("/proc/self/fd")), "tasks": len(asyncio.all_tasks()),
             "threads": threading.active_count()}
 
@@ -95,4 +97,5 @@ machines:
             assert await asyncio.wait_for(task, 20) == 0
     print(f"\nFIGURES no leaks after {CYCLES} cycles: start={json.dumps(start)} end={json.dumps(end)}")
     assert births == CYCLES + 3
-    assert end == start, f"after {CYCLES} connect/drop cycles: {start} -> {end}"
+    # A leak is growth: 50 cycles would leave 50+ descriptors, tasks or threads behind.
+    assert all(end[key] <= start[key] for key in start), f"after {CYCLES} connect/drop cycles: {start} -> {end}"
