@@ -112,9 +112,7 @@ class Daemon:
                     await self.reload()
         finally:
             self.notifier.stopping()
-            for task in background:
-                task.cancel()
-            await asyncio.gather(*background, return_exceptions=True)
+            await cancel_and_wait(background)
             await self.shutdown()
         return 0
 
@@ -127,10 +125,7 @@ class Daemon:
     async def shutdown(self) -> None:
         """Stop polling, DDEATHs + NDEATH + DISCONNECT, then close PDUs to every CNC."""
         await self.commands.close()
-        tasks = list(self._tasks.values())
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await cancel_and_wait(list(self._tasks.values()))
         with contextlib.suppress(Exception):
             await self.publisher.stop()
         self.spool.close()  # after the publisher spooled what it could not confirm
@@ -177,8 +172,7 @@ class Daemon:
         task = self._tasks.pop(machine_id, None)
         poller = self.pollers.pop(machine_id, None)
         if task is not None:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
+            await cancel_and_wait([task])
         if poller is not None:
             if poller.online:
                 with contextlib.suppress(Exception):
@@ -262,6 +256,22 @@ class Daemon:
         while True:
             await asyncio.sleep(NODE_METRICS_PERIOD_S)
             self.publisher.set_node_metrics(self.node_metrics())
+
+
+async def cancel_and_wait(tasks: list[asyncio.Task[None]]) -> None:
+    """Cancel tasks and wait until every one has ended.
+
+    A cancellation can be lost (Python 3.11's asyncio.wait_for swallows one that arrives as its inner
+    call completes, in library code too), so a task still running a second later is cancelled again.
+    """
+    pending = {task for task in tasks if not task.done()}
+    for task in pending:
+        task.cancel()
+    while pending:
+        _, pending = await asyncio.wait(pending, timeout=1.0)
+        for task in pending:
+            log.warning("task still running after cancel, cancelling again task=%s", task.get_name())
+            task.cancel()
 
 
 def _stale_limit(machine: MachineConfig) -> float:

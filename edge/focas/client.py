@@ -115,12 +115,14 @@ class FocasClient(CncSession):
         self._in_flight = False
         try:
             if healthy:
-                await asyncio.wait_for(self._say_goodbye(reader, writer), CLOSE_TIMEOUT)
+                async with asyncio.timeout(CLOSE_TIMEOUT):
+                    await self._say_goodbye(reader, writer)
         except Exception as exc:  # closing must never raise
             log.debug("close PDU not acknowledged peer=%s error=%r", self.describe(), exc)
         writer.close()
         with contextlib.suppress(Exception):
-            await asyncio.wait_for(writer.wait_closed(), CLOSE_TIMEOUT)
+            async with asyncio.timeout(CLOSE_TIMEOUT):
+                await writer.wait_closed()
 
     async def _batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
         plans = [self._plan(item) for item in items]

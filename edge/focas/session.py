@@ -109,7 +109,8 @@ class CncSession(abc.ABC):
 
     async def connect(self) -> SysInfo:
         try:
-            self.sysinfo = await asyncio.wait_for(self._open(), self.connect_timeout)
+            async with asyncio.timeout(self.connect_timeout):
+                self.sysinfo = await self._open()
         except TimeoutError as exc:
             await self._close()
             raise FocasTimeout(f"connect: no answer within {self.connect_timeout}s") from exc
@@ -265,7 +266,10 @@ class CncSession(abc.ABC):
     async def _guarded(self, operation: Any) -> Any:
         """Apply the request timeout; on timeout or protocol trouble, reset the session (never wedge)."""
         try:
-            return await asyncio.wait_for(operation, self.timeout)
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a cancellation that
+            # arrives as the inner call completes, and a poller would then survive its shutdown.
+            async with asyncio.timeout(self.timeout):
+                return await operation
         except TimeoutError as exc:
             await self.reset()
             raise FocasTimeout(f"{self.describe()}: no complete answer within {self.timeout}s") from exc

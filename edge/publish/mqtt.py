@@ -198,7 +198,8 @@ class MqttConnection:
         fut = asyncio.get_running_loop().create_future()
         self._pending[mid] = fut
         try:
-            return await asyncio.wait_for(fut, timeout)
+            async with asyncio.timeout(timeout):  # not wait_for: see edge.focas.session._guarded
+                return await fut
         except TimeoutError:
             raise MqttUnavailable(f"no {what} within {timeout}s from {self._settings.host}:"
                                   f"{self._settings.port}") from None
