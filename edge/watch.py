@@ -129,6 +129,8 @@ class Watcher:
                 lines = lines[:1]
         else:
             lines = json_lines(msg.topic, data)
+        if msg.retain:  # kept by the broker from earlier: it may predate this run
+            lines = [line + " (retained)" for line in lines]
         with self._lock:
             self.count += 1
             for line in lines:

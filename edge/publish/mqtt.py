@@ -298,8 +298,10 @@ class MqttConnection:
 
     def _loop_disconnected(self, reason: str) -> None:
         if self.connected:
-            log.warning("MQTT connection lost host=%s port=%s client_id=%s reason=%s",
-                        self._settings.host, self._settings.port, self._client_id, reason)
+            stopping = self._client is None  # stop() clears it first: a disconnect we asked for
+            log.log(logging.INFO if stopping else logging.WARNING,
+                    "MQTT %s host=%s port=%s client_id=%s reason=%s", "disconnected" if stopping else "connection lost",
+                    self._settings.host, self._settings.port, self._client_id, reason)
         self._set_disconnected()
 
     def _set_disconnected(self) -> None:
