@@ -31,9 +31,10 @@ from edge.cli.read import (
     open_cnc,
     plan_read,
 )
+from edge.command.target_io import write_target
 from edge.focas.errors import FocasError
 from edge.focas.model import PmcType
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
+from edge.targets import MacroTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
 
 _PMC_FORMATS = {PmcType.BYTE: "B", PmcType.WORD: "H", PmcType.LONG: "I", PmcType.FLOAT: "f",
                 PmcType.DOUBLE: "d"}
@@ -120,20 +121,7 @@ def _pmc_bytes(text: str, target: PmcTarget, raw: str) -> bytes:
 
 async def apply(session: Any, write: Write) -> None:
     """Send one write through the session's method for its kind."""
-    target, value = write.target, write.value
-    if isinstance(target, MacroTarget):
-        assert isinstance(value, float)
-        await session.write_macro(target.first, value)
-    elif isinstance(target, PmcTarget) and target.bit is not None:
-        await session.write_pmc_bit(target.area, target.start, target.bit, bool(value))
-    elif isinstance(target, PmcTarget):
-        assert isinstance(value, bytes)
-        await session.write_pmc(target.area, target.start, value)
-    elif isinstance(target, ParamTarget) and target.bit is not None:
-        await session.write_param_bit(target.first, target.bit, bool(value), axis=target.axis)
-    else:
-        assert isinstance(target, ParamTarget) and isinstance(value, int | float)
-        await session.write_param(target.first, value, axis=target.axis)
+    await write_target(session, write.target, write.value)
 
 
 async def write_all(session: Any, writes: list[Write]) -> list[ItemOutcome]:

@@ -90,15 +90,23 @@ def _type_name(ptype: int) -> str:
 
 async def apply(session: CncSession, op: WriteOp) -> None:
     """Send `op` through the session call for its kind."""
-    target, value = op.target, op.value
+    await write_target(session, op.target, op.value)
+
+
+async def write_target(session: CncSession, target: WritableTarget, value: object) -> None:
+    """One write through the session call for its target kind (the CLI's `write` uses it too).
+
+    PMC ranges take their bytes, or element values that are packed per the target's data type.
+    """
     if isinstance(target, MacroTarget):
         assert isinstance(value, float)
         await session.write_macro(target.first, value)
     elif isinstance(target, PmcTarget) and target.bit is not None:
         await session.write_pmc_bit(target.area, target.start, target.bit, bool(value))
     elif isinstance(target, PmcTarget):
-        assert isinstance(value, tuple)
-        await session.write_pmc(target.area, target.start, pmc_bytes(target, value))
+        assert isinstance(value, bytes | tuple)
+        data = value if isinstance(value, bytes) else pmc_bytes(target, value)
+        await session.write_pmc(target.area, target.start, data)
     elif target.bit is not None:
         await session.write_param_bit(target.first, target.bit, bool(value), axis=target.axis)
     else:
