@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, is_dataclass
 from datetime import datetime
-from typing import Any
+from typing import Any, TypeVar
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
@@ -36,6 +36,9 @@ DEFAULT_TIMEOUT = 5.0
 
 
 # ---- shared by read and write ------------------------------------------------------------------------------
+
+
+T = TypeVar("T")
 
 
 def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
@@ -249,17 +252,24 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def parse_and_open(command: str, args: argparse.Namespace, parse: Callable[[str], T],
+                   texts: list[str]) -> tuple[list[T], Any] | int:
+    """Every item parsed, then the session opened; a usage problem is printed and EXIT_USAGE returned."""
     try:
-        plans = [plan_read(text) for text in args.items]
+        parsed = [parse(text) for text in texts]
+        return parsed, open_cnc(args)
     except TargetError as exc:
-        print(f"focas-edge read: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        session = open_cnc(args)
+        print(f"focas-edge {command}: {exc}", file=sys.stderr)
     except ConfigError as exc:
-        print(f"focas-edge read: {'; '.join(exc.problems)}", file=sys.stderr)
-        return EXIT_USAGE
+        print(f"focas-edge {command}: {'; '.join(exc.problems)}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def run(args: argparse.Namespace) -> int:
+    prepared = parse_and_open("read", args, plan_read, args.items)
+    if isinstance(prepared, int):
+        return prepared
+    plans, session = prepared
     outcomes = asyncio.run(read_all(session, plans))
     (print_json if args.json else print_table)(outcomes)
     failed = [o for o in outcomes if o.error is not None]

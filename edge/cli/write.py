@@ -20,15 +20,14 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
-from edge import ConfigError
-from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli import EXIT_FAILURE, EXIT_OK
 from edge.cli.read import (
     ItemOutcome,
     add_connection_arguments,
     describe_error,
     error_object,
     json_value,
-    open_cnc,
+    parse_and_open,
     plan_read,
 )
 from edge.command.target_io import write_target
@@ -168,16 +167,10 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        writes = [parse_write(text) for text in args.writes]
-    except TargetError as exc:
-        print(f"focas-edge write: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        session = open_cnc(args)
-    except ConfigError as exc:
-        print(f"focas-edge write: {'; '.join(exc.problems)}", file=sys.stderr)
-        return EXIT_USAGE
+    prepared = parse_and_open("write", args, parse_write, args.writes)
+    if isinstance(prepared, int):
+        return prepared
+    writes, session = prepared
     outcomes = asyncio.run(write_all(session, writes))
     for outcome in outcomes:
         if args.json:
