@@ -15,24 +15,13 @@ from edge.config import parse_config
 from edge.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
+from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer, metrics_by_name
 
 pytestmark = pytest.mark.integration
 
 
-def config_text(broker: Mosquitto, state_dir: Path, machines: str, extra: str = "") -> str:
-    return f"""
-mqtt:
-  host: {broker.host}
-  port: {broker.port}
-  formats: [sparkplug, json]
-  sparkplug: {{group_id: plant, edge_node_id: gw}}
-  json: {{prefix: focas}}
-state_dir: {state_dir}
-{extra}
-machines:
-{machines}
-"""
+config_text = daemon_config
 
 
 def machine_entry(machine_id: str, port: int, **fields: object) -> str:

@@ -19,6 +19,7 @@ from edge.daemon import Daemon
 from edge.sim.fleet import Fleet, Machine, MachineSpec
 from edge.sim.native_server import ServerStats
 from tests.helpers import Mosquitto, async_wait_for
+from tests.integration.daemon_config import daemon_config
 from tests.integration.delivery import keep_changing
 from tests.integration.mqtt_observer import Observer
 
@@ -34,16 +35,7 @@ def config_text(broker: Mosquitto, state_dir: Path, fleet: Fleet) -> str:
         f"poll: {{periods: {{status: 0.1s, macros: 0.1s}}, macros: [500]}}, "
         f"timeouts: {{request_s: {REQUEST_TIMEOUT_S}, connect_s: 1, backoff_initial_s: 0.1, "
         f"backoff_max_s: 0.5}}}}\n" for i, m in enumerate(fleet))
-    return f"""
-mqtt:
-  host: {broker.host}
-  port: {broker.port}
-  formats: [sparkplug, json]
-  sparkplug: {{group_id: plant, edge_node_id: gw}}
-  json: {{prefix: focas}}
-state_dir: {state_dir}
-machines:
-{machines}"""
+    return daemon_config(broker, state_dir, machines)
 
 
 @pytest.fixture

@@ -20,6 +20,7 @@ from edge.daemon import Daemon
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.sim.fleet import Fleet, Machine, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
+from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer
 
 pytestmark = pytest.mark.integration
@@ -52,18 +53,7 @@ def packed(machine_id: str, port: int | None, extra: str = "") -> str:
 
 
 def config_text(broker: Mosquitto, state_dir: Path, machines: str, deadline: float = 3.0) -> str:
-    return f"""
-mqtt:
-  host: {broker.host}
-  port: {broker.port}
-  formats: [sparkplug, json]
-  sparkplug: {{group_id: plant, edge_node_id: gw}}
-  json: {{prefix: focas}}
-state_dir: {state_dir}
-{WRITES.format(deadline=deadline)}
-machines:
-{machines}
-"""
+    return daemon_config(broker, state_dir, machines, WRITES.format(deadline=deadline))
 
 
 @pytest.fixture
