@@ -42,6 +42,7 @@ class FaultPlan:
     hang: int = 0
     garbage: int = 0
     ew: dict[str | int, int] = field(default_factory=dict)
+    hang_on: dict[str | int, int] = field(default_factory=dict)  # function name/command -> count (-1 always)
     max_sessions: int | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
@@ -52,11 +53,12 @@ class FaultPlan:
             self.refuse = self.hang = self.garbage = 0
             self.drop_after = None
             self.ew = {}
+            self.hang_on = {}
             self.max_sessions = None
 
     def update(self, changes: dict[str, Any]) -> None:
         """Set fields from a mapping (admin endpoint, scenario file); ValueError names an unknown one."""
-        known = {"latency", "refuse", "drop_after", "hang", "garbage", "ew", "max_sessions"}
+        known = {"latency", "refuse", "drop_after", "hang", "garbage", "ew", "hang_on", "max_sessions"}
         unknown = sorted(set(changes) - known)
         if unknown:
             raise ValueError(f"unknown fault(s) {unknown}; expected some of {sorted(known)}")
@@ -64,6 +66,8 @@ class FaultPlan:
             for name, value in changes.items():
                 if name == "ew":
                     self.ew = {_ew_key(k): int(v) for k, v in dict(value or {}).items()}
+                elif name == "hang_on":
+                    self.hang_on = {_ew_key(k): int(v) for k, v in dict(value or {}).items()}
                 elif name == "latency":
                     self.latency = float(value)
                 elif name in ("drop_after", "max_sessions"):
@@ -76,7 +80,8 @@ class FaultPlan:
         with self._lock:
             return {"latency": self.latency, "refuse": self.refuse, "drop_after": self.drop_after,
                     "hang": self.hang, "garbage": self.garbage,
-                    "ew": {str(k): v for k, v in self.ew.items()}, "max_sessions": self.max_sessions}
+                    "ew": {str(k): v for k, v in self.ew.items()},
+                    "hang_on": {str(k): v for k, v in self.hang_on.items()}, "max_sessions": self.max_sessions}
 
     # ---- consumed by the server ------------------------------------------------------------------
     def _take(self, name: str) -> bool:
@@ -94,6 +99,20 @@ class FaultPlan:
 
     def take_hang(self) -> bool:
         return self._take("hang")
+
+    def take_hang_on(self, calls: list[tuple[int, str]]) -> bool:
+        """Whether a request carrying one of these (command, function name) calls is to be applied and
+        then its answer lost (half sent, then silence): aims a hang at one function, e.g. a write."""
+        with self._lock:
+            for command, name in calls:
+                key = command if command in self.hang_on else name
+                remaining = self.hang_on.get(key, 0)
+                if remaining == 0:
+                    continue
+                if remaining > 0:
+                    self.hang_on[key] = remaining - 1
+                return True
+            return False
 
     def take_garbage(self) -> bool:
         return self._take("garbage")

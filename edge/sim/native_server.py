@@ -191,12 +191,17 @@ HANDLERS: dict[Function, Handler] = {
 }
 
 
+def _function_name(req: RequestSubpacket) -> str:
+    function = fn.BY_COMMAND.get((req.cls, req.command))
+    return function.name if function else f"0x{req.command:04x}"
+
+
 def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPlan | None = None,
                      ctx: Context | None = None) -> ResponseSubpacket:
     """The answer to one request subpacket: data, or an error subpacket with the EW code."""
     ctx = ctx or Context.from_sysinfo(state.sysinfo())
     function = fn.BY_COMMAND.get((req.cls, req.command))
-    name = function.name if function else f"0x{req.command:04x}"
+    name = _function_name(req)
     forced = faults.ew_for(req.command, name) if faults else None
     if forced is not None:
         return error_response(req, forced)
@@ -353,7 +358,8 @@ class NativeServer:
             return "ok"
         answers = [answer_subpacket(self.state, req, self.faults, self.context) for req in requests]
         reply = encode_response(answers, version)
-        if self.faults.take_hang():
+        calls = [(req.command, _function_name(req)) for req in requests]
+        if self.faults.take_hang() or self.faults.take_hang_on(calls):
             writer.write(reply[: max(1, len(reply) // 2)])
             await writer.drain()
             return "hang"

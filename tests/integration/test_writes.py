@@ -307,16 +307,8 @@ async def test_write_waits_for_reconnect_within_deadline_else_fails_cleanly(
 
 def lose_answer_after_next_macro_write(machine: Machine) -> None:
     """The simulator applies the next macro write, then sends half its answer and falls silent (the
-    `hang` fault, armed from inside the write so it hits exactly that request and no poll)."""
-    state = machine.state
-    original = state.write_macro
-
-    def write_then_hang(number: int, value: float | None, protocol: str = "native") -> None:
-        original(number, value, protocol)
-        machine.faults.update({"hang": 1})
-        del state.write_macro  # once: back to the class method
-
-    state.write_macro = write_then_hang  # type: ignore[method-assign]
+    `hang_on` fault aims the hang at that function only, never at a poll)."""
+    machine.faults.update({"hang_on": {"write_macros": 1}})  # 0x16, the client's form for this value
 
 
 async def test_write_whose_answer_is_lost_is_reread_not_repeated(

@@ -472,3 +472,15 @@ def test_fleet_machines_raise_and_clear_alarms_by_default() -> None:
     assert seen, "no alarm came during three cycles"
     clock.tick(8.0)
     assert state.active_alarms() == []
+
+
+def test_hang_on_aims_at_one_function_and_counts_down() -> None:
+    from edge.sim.faults import FaultPlan
+
+    faults = FaultPlan()
+    faults.update({"hang_on": {"write_macros": 1, "0x8002": -1}})
+    assert not faults.take_hang_on([(0x15, "read_macros"), (0x45, "read_clock")])  # polls never hang
+    assert faults.take_hang_on([(0x16, "write_macros")])
+    assert not faults.take_hang_on([(0x16, "write_macros")])  # once
+    assert faults.take_hang_on([(0x8002, "write_pmc")]) and faults.take_hang_on([(0x8002, "write_pmc")])
+    assert faults.describe()["hang_on"] == {"write_macros": 0, str(0x8002): -1}
