@@ -207,10 +207,8 @@ class MqttConfig(_Model):
 
     @model_validator(mode="after")
     def _consistent(self) -> MqttConfig:
-        if "sparkplug" in self.formats and self.sparkplug is None:
-            raise _at("sparkplug", "required (group_id, edge_node_id) when formats includes sparkplug")
-        if self.password_env and self.password_file:
-            raise _at("password_file", "give password_env or password_file, not both")
+        for key, message in _mqtt_rules(self.formats, self.sparkplug, self.password_env, self.password_file):
+            raise _at(key, message)
         if (self.password_env or self.password_file) and not self.username:
             raise _at("username", "a password needs a username")
         return self
@@ -254,6 +252,13 @@ class Periods(_Model):
     diags: Period = 60.0
 
 
+def _not_before(end: int | None, start: int | None) -> int | None:
+    """The end of an inclusive range, refused when it lies before the start."""
+    if end is not None and start is not None and end < start:
+        raise ValueError(f"end {end} before start {start}")
+    return end
+
+
 def _macro_shorthand(value: object) -> object:
     if isinstance(value, bool):
         return value
@@ -284,10 +289,7 @@ class MacroRange(_Model):
     @field_validator("last")
     @classmethod
     def _ordered(cls, value: int | None, info: ValidationInfo) -> int | None:
-        first = info.data.get("first")
-        if value is not None and first is not None and value < first:
-            raise ValueError(f"end {value} before start {first}")
-        return value
+        return _not_before(value, info.data.get("first"))
 
     @model_validator(mode="after")
     def _name_for_one(self) -> MacroRange:
@@ -347,10 +349,7 @@ class PmcRange(_Model):
     @field_validator("end")
     @classmethod
     def _ordered(cls, value: int | None, info: ValidationInfo) -> int | None:
-        start = info.data.get("start")
-        if value is not None and start is not None and value < start:
-            raise ValueError(f"end {value} before start {start}")
-        return value
+        return _not_before(value, info.data.get("start"))
 
     @model_validator(mode="after")
     def _complete(self) -> PmcRange:
@@ -857,17 +856,27 @@ def _duplicate_ids(data: dict[str, Any]) -> Iterator[str]:
             seen[machine_id.lower()] = index
 
 
+def _mqtt_rules(formats: object, sparkplug: object, password_env: object,
+                password_file: object) -> list[tuple[str, str]]:
+    """Rules between mqtt keys as (key, message): one source for the model validator and for the raw
+    re-check below."""
+    rules = []
+    if isinstance(formats, list) and "sparkplug" in formats and sparkplug is None:
+        rules.append(("sparkplug", "required (group_id, edge_node_id) when formats includes sparkplug"))
+    if password_env and password_file:
+        rules.append(("password_file", "give password_env or password_file, not both"))
+    return rules
+
+
 def _mqtt_cross_checks(data: dict[str, Any]) -> Iterator[str]:
-    """Rules between mqtt keys, re-checked on the raw data: pydantic skips model validators when any
-    field of the section is invalid, and a bad file must show every problem at once."""
+    """The mqtt rules re-checked on the raw data: pydantic skips model validators when any field of the
+    section is invalid, and a bad file must show every problem at once."""
     mqtt = data.get("mqtt")
     if not isinstance(mqtt, dict):
         return
-    formats = mqtt.get("formats", list(FORMATS))
-    if isinstance(formats, list) and "sparkplug" in formats and mqtt.get("sparkplug") is None:
-        yield "mqtt.sparkplug: required (group_id, edge_node_id) when formats includes sparkplug"
-    if mqtt.get("password_env") and mqtt.get("password_file"):
-        yield "mqtt.password_file: give password_env or password_file, not both"
+    for key, message in _mqtt_rules(mqtt.get("formats", list(FORMATS)), mqtt.get("sparkplug"),
+                                    mqtt.get("password_env"), mqtt.get("password_file")):
+        yield f"mqtt.{key}: {message}"
 
 
 def _strip_quote(message: str) -> str:

@@ -260,7 +260,7 @@ class MachinePoller:
 
     async def _tick(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickResult:
         """One batched round trip for the due groups."""
-        reads = [r for r in plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})]
+        reads = plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})
         items: list[it.ReadItem] = [r.item for r in reads]
         items.append(it.ReadClock())
         wall_before, mono_before = time.time(), time.monotonic()
