@@ -1,14 +1,17 @@
-"""One MQTT connection (paho-mqtt 2.x) with its network loop in paho's thread and events on asyncio.
+"""One MQTT connection (paho-mqtt 2.x) driven by the asyncio event loop: no network thread.
 
 What this adds to paho:
-- every callback is handed to the event loop with call_soon_threadsafe, so the rest of the publisher is
-  single-threaded;
-- a fresh Will before *every* CONNECT, automatic reconnects included (`before_connect`, from paho's
+- paho's socket is watched by the event loop (add_reader; writes flushed once per loop turn, add_writer
+  only while the kernel buffer is full), so a publish costs no thread hand-off, no socketpair wake-up and
+  no lock contention: every message published during one loop turn goes out in one flush. Only the
+  blocking part of a connect attempt (TCP connect, TLS handshake) runs in a worker thread;
+- a fresh Will before *every* CONNECT, reconnects included (`before_connect`, from paho's
   on_pre_connect), which is how Sparkplug's bdSeq advances;
 - clean session (3.1.1) / clean start with session expiry 0 (5) on every attempt: paho's MQTT 5 default,
   clean start on the first connect only, would break Sparkplug on reconnect;
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
   lock-step after a broker restart;
+- keepalive (PINGREQ, and a dead-broker verdict when no PINGRESP comes) from a once-a-second loop timer;
 - awaitable SUBACK / PUBACK;
 - nothing of a previous connection is re-sent after a reconnect (the publisher's spool owns redelivery).
 """
@@ -16,12 +19,12 @@ What this adds to paho:
 from __future__ import annotations
 
 import asyncio
-import collections
 import contextlib
 import logging
 import random
 import socket
 import ssl
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +38,9 @@ from paho.mqtt.reasoncodes import ReasonCode
 from edge.publish.settings import PublishSettings
 
 log = logging.getLogger(__name__)
+
+MISC_INTERVAL_S = 1.0  # keepalive housekeeping (paho's loop_misc); keepalives are whole seconds
+CONNECT_TIMEOUT_S = 5.0  # TCP connect + TLS handshake of one attempt
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +72,7 @@ def backoff_delay(attempt: int, minimum: float, maximum: float, rng: random.Rand
 
 
 class MqttConnection:
-    """A supervised connection; create and use it on the event loop that receives its callbacks."""
+    """A supervised connection; create and use it on the event loop that drives it."""
 
     def __init__(self, settings: PublishSettings, client_id: str, *,
                  before_connect: Callable[[bool], Will | None],
@@ -81,16 +87,20 @@ class MqttConnection:
         self._on_message = on_message
         self._v5 = settings.protocol == "5"
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._loop_thread = 0
         self._client: paho.Client | None = None
-        self._attempt = 0  # failed attempts since the last CONNACK (paho thread only)
-        self._previous_unsent = False  # the previous attempt failed before CONNECT left (paho thread only)
+        self._supervisor: asyncio.Task[None] | None = None
+        self._session_over: asyncio.Event | None = None  # set when the current socket is closed
+        self._watched: Any = None  # the socket the loop watches (paho's, between connect and close)
+        self._writer_added = False
+        self._flush_scheduled = False
+        self._connecting = False  # a connect attempt runs in a worker thread
+        self._misc_handle: asyncio.TimerHandle | None = None
+        self._attempt = 0  # failed attempts since the last CONNACK
+        self._previous_unsent = False  # the previous attempt failed before CONNECT left
         self._will_tag: object = None
         self._pending: dict[int, asyncio.Future[Any]] = {}
-        # PUBACKs (and QoS 0 "written" notices) from the paho thread, drained by the loop in batches:
-        # one loop wake-up per batch instead of one per message (QoS 0 DATA is ~all the traffic).
-        self._acks: collections.deque[tuple[int, object]] = collections.deque()
-        self._acks_scheduled = False
-        self.connected = False  # as seen on the event loop
+        self.connected = False  # CONNACK accepted and not lost since
         self.connects = 0
 
     # -- lifecycle -----------------------------------------------------------------------------------
@@ -98,6 +108,7 @@ class MqttConnection:
     def start(self) -> None:
         """Begin connecting in the background; on_connected is called (on the loop) once it succeeds."""
         self._loop = asyncio.get_running_loop()
+        self._loop_thread = threading.get_ident()
         client = self._make_client()
         self._client = client
         s = self._settings
@@ -105,14 +116,14 @@ class MqttConnection:
         if self._v5:
             kwargs["clean_start"] = True  # every attempt; session expiry stays 0 (property absent)
         client.connect_async(s.host, s.port, keepalive=s.keepalive, **kwargs)
-        client.loop_start()
+        self._supervisor = self._loop.create_task(self._supervise(client))
 
     def _make_client(self) -> paho.Client:
         s = self._settings
         protocol = paho.MQTTv5 if self._v5 else paho.MQTTv311
         kwargs: dict[str, Any] = {} if self._v5 else {"clean_session": True}
         client = paho.Client(CallbackAPIVersion.VERSION2, client_id=self._client_id, protocol=protocol,
-                             reconnect_on_failure=True, **kwargs)
+                             reconnect_on_failure=False, **kwargs)
         if s.username is not None:
             client.username_pw_set(s.username, s.password)
         if s.tls:
@@ -122,32 +133,40 @@ class MqttConnection:
                            cert_reqs=ssl.CERT_REQUIRED)
             if s.tls_insecure:
                 client.tls_insecure_set(True)
-        _set_retry_delay(client, self._delay(), self._settings.reconnect_max_s)
+        client.connect_timeout = CONNECT_TIMEOUT_S
         client.on_pre_connect = self._paho_pre_connect
         client.on_connect = self._paho_connect
-        client.on_connect_fail = self._paho_connect_fail
         client.on_disconnect = self._paho_disconnect
         client.on_message = self._paho_message
         client.on_subscribe = self._paho_subscribe
-        client.on_publish = self._paho_publish
+        # on_publish stays unset while no PUBACK is awaited: paho builds a reason code and a property set
+        # for every QoS 0 message it reports, and QoS 0 DATA is nearly all the traffic (see _wait).
+        client.on_socket_close = self._paho_socket_close
         return client
 
     async def stop(self, *, with_will: bool = False, timeout: float = 5.0) -> None:
-        """DISCONNECT and end the network thread.
+        """DISCONNECT, close the socket and end the supervisor.
 
         MQTT 5 `with_will`: reason 0x04 "disconnect with will message", so the broker sends the Will too.
         """
         client, self._client = self._client, None
         if client is None:
             return
-        if self._v5 and with_will:
-            client.disconnect(reasoncode=ReasonCode(PacketTypes.DISCONNECT, "Disconnect with will message"))
-        else:
-            client.disconnect()
-        try:
-            await asyncio.wait_for(asyncio.to_thread(client.loop_stop), timeout)
-        except TimeoutError:
-            log.warning("MQTT network thread did not stop within %ss client_id=%s", timeout, self._client_id)
+        supervisor = self._supervisor
+        if self._watched is not None:
+            if self._v5 and with_will:
+                client.disconnect(reasoncode=ReasonCode(PacketTypes.DISCONNECT, "Disconnect with will message"))
+            else:
+                client.disconnect()
+        elif not self._connecting and supervisor is not None:
+            supervisor.cancel()  # waiting out a backoff delay: nothing to close
+        if supervisor is not None:
+            _, running = await asyncio.wait({supervisor}, timeout=timeout)
+            if running:
+                log.warning("MQTT connection did not close within %ss client_id=%s", timeout, self._client_id)
+                supervisor.cancel()
+                await asyncio.wait({supervisor})
+        self._close_socket(client)
         self._set_disconnected()
         for fut in self._pending.values():
             if not fut.done():
@@ -161,6 +180,107 @@ class MqttConnection:
         if isinstance(sock, socket.socket):
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
+
+    # -- supervision (event loop) ----------------------------------------------------------------------
+
+    async def _supervise(self, client: paho.Client) -> None:
+        """Connect, serve the socket until it closes, wait the backoff delay, again; until stop()."""
+        loop = asyncio.get_running_loop()
+        while self._client is client:
+            self._session_over = asyncio.Event()
+            if await self._attempt_connect(loop, client):
+                await self._session_over.wait()
+            if self._client is not client:
+                return
+            delay = self._delay()
+            self._attempt += 1
+            await asyncio.sleep(delay)
+
+    async def _attempt_connect(self, loop: asyncio.AbstractEventLoop, client: paho.Client) -> bool:
+        """One attempt: the blocking TCP/TLS connect and the CONNECT packet in a worker thread, then the
+        socket is handed to the loop. True when a socket is up (the CONNACK decides the rest)."""
+        self._unwatch()
+        client.on_socket_register_write = None  # in the worker, paho writes CONNECT itself
+        client.on_socket_unregister_write = None
+        self._connecting = True
+        try:
+            await loop.run_in_executor(None, client.reconnect)
+        except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
+            log.info("MQTT connect failed host=%s port=%s client_id=%s attempt=%d error=%s",
+                     self._settings.host, self._settings.port, self._client_id, self._attempt + 1, exc)
+            return False
+        finally:
+            self._connecting = False
+        sock = client.socket()
+        if self._client is not client or sock is None:  # stopped meanwhile, or paho gave the socket up
+            self._close_socket(client)
+            return False
+        self._previous_unsent = False  # CONNECT left: a later failure is not "unsent"
+        self._watch(loop, client, sock)
+        return True
+
+    def _watch(self, loop: asyncio.AbstractEventLoop, client: paho.Client, sock: Any) -> None:
+        self._watched = sock
+        self._writer_added = False
+        client.on_socket_register_write = self._paho_want_write
+        client.on_socket_unregister_write = self._paho_written
+        loop.add_reader(sock, self._readable, client)
+        if client.want_write():
+            self._schedule_flush(client)
+        self._misc_handle = loop.call_later(MISC_INTERVAL_S, self._misc, client)
+
+    def _unwatch(self) -> None:
+        """Stop watching the current socket (before paho closes it, so a reused fd number is never ours)."""
+        sock, self._watched = self._watched, None
+        if self._misc_handle is not None:
+            self._misc_handle.cancel()
+            self._misc_handle = None
+        if sock is None or self._loop is None:
+            return
+        self._loop.remove_reader(sock)
+        if self._writer_added:
+            self._loop.remove_writer(sock)
+            self._writer_added = False
+        if self._session_over is not None:
+            self._session_over.set()
+
+    def _close_socket(self, client: paho.Client) -> None:
+        self._unwatch()
+        sock = client.socket()
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.close()
+
+    def _readable(self, client: paho.Client) -> None:
+        rc = client.loop_read()
+        # TLS may hold decrypted bytes the kernel no longer reports: read them now.
+        while rc == MQTTErrorCode.MQTT_ERR_SUCCESS and _tls_pending(client.socket()):
+            rc = client.loop_read()
+
+    def _flush(self, client: paho.Client) -> None:
+        """Write what paho queued (all messages published since the last flush); if the kernel buffer
+        fills, the rest waits for the socket to become writable."""
+        self._flush_scheduled = False
+        sock = self._watched
+        if sock is None or client.socket() is not sock:
+            return
+        client.loop_write()
+        if client.want_write() and self._watched is sock and not self._writer_added and self._loop is not None:
+            self._loop.add_writer(sock, self._flush, client)
+            self._writer_added = True
+
+    def _schedule_flush(self, client: paho.Client) -> None:
+        if not self._flush_scheduled and self._loop is not None:
+            self._flush_scheduled = True
+            self._loop.call_soon(self._flush, client)
+
+    def _misc(self, client: paho.Client) -> None:
+        self._misc_handle = None
+        if client.socket() is None or self._watched is None or self._loop is None:
+            return
+        client.loop_misc()
+        if self._watched is not None:
+            self._misc_handle = self._loop.call_later(MISC_INTERVAL_S, self._misc, client)
 
     # -- operations (event loop) ---------------------------------------------------------------------
 
@@ -179,10 +299,13 @@ class MqttConnection:
         client = self._client
         if client is None or not self.connected:
             raise MqttUnavailable(f"cannot publish {topic}: not connected")
+        client.on_publish = self._paho_publish  # before the publish: the PUBACK may come in the same turn
         info = client.publish(topic, payload, qos=qos, retain=retain)
         if info.rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
+            self._publish_notices_if_needed(client)
             raise MqttUnavailable(f"cannot publish {topic}: {paho.error_string(info.rc)}")
         if qos == 0:
+            self._publish_notices_if_needed(client)
             return
         await self._wait(info.mid, timeout, f"PUBACK for {topic}")
 
@@ -210,28 +333,20 @@ class MqttConnection:
                                   f"{self._settings.port}") from None
         finally:
             self._pending.pop(mid, None)
+            client = self._client
+            if client is not None:
+                self._publish_notices_if_needed(client)
 
-    # -- paho thread -> event loop ---------------------------------------------------------------------
+    def _publish_notices_if_needed(self, client: paho.Client) -> None:
+        """Report publishes (PUBACKs) only while someone waits for one."""
+        if not self._pending:
+            client.on_publish = None
 
-    def _to_loop(self, func: Callable[..., None], *args: object) -> bool:
-        """Run `func` on the event loop; False if there is no loop to run it (stopped, closed)."""
-        loop = self._loop
-        if loop is None or loop.is_closed():
-            return False
-        try:
-            loop.call_soon_threadsafe(func, *args)
-        except RuntimeError:  # the loop closed between the check and the call
-            return False
-        return True
+    # -- paho callbacks (all on the event loop, but for on_pre_connect: in the connect worker) ----------
 
     def _delay(self) -> float:
         s = self._settings
         return backoff_delay(self._attempt, s.reconnect_min_s, s.reconnect_max_s)
-
-    def _schedule_retry(self, client: paho.Client) -> None:
-        delay = self._delay()
-        self._attempt += 1
-        _set_retry_delay(client, delay, delay)  # paho waits exactly this long before the next attempt
 
     def _paho_pre_connect(self, client: paho.Client, userdata: object) -> None:
         will = self._before_connect(self._previous_unsent)
@@ -243,14 +358,24 @@ class MqttConnection:
         client.will_set(will.topic, will.payload, qos=will.qos, retain=will.retain)
         self._will_tag = will.tag
 
+    def _paho_want_write(self, client: paho.Client, userdata: object, sock: Any) -> None:
+        self._schedule_flush(client)
+
+    def _paho_written(self, client: paho.Client, userdata: object, sock: Any) -> None:
+        if self._writer_added and self._loop is not None and sock is self._watched:
+            self._loop.remove_writer(sock)
+            self._writer_added = False
+
+    def _paho_socket_close(self, client: paho.Client, userdata: object, sock: Any) -> None:
+        if threading.get_ident() == self._loop_thread and sock is self._watched:
+            self._unwatch()
+
     def _paho_connect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                       properties: Properties | None) -> None:
-        self._previous_unsent = False
         if reason.is_failure:
             log.warning("MQTT connection refused host=%s port=%s client_id=%s reason=%s",
                         self._settings.host, self._settings.port, self._client_id, reason)
-            self._schedule_retry(client)
-            return
+            return  # paho closes the socket; the supervisor retries after the backoff delay
         self._attempt = 0
         # QoS 1 messages of the previous connection would be re-sent by paho now, before our births and
         # with a stale Sparkplug seq; the publisher's spool re-sends their samples instead.
@@ -258,18 +383,11 @@ class MqttConnection:
         if stale:
             log.info("dropped %d unacknowledged message(s) of the previous connection client_id=%s",
                      len(stale), self._client_id)
-        self._to_loop(self._loop_connected, self._will_tag)
-
-    def _paho_connect_fail(self, client: paho.Client, userdata: object) -> None:
-        log.info("MQTT connect failed host=%s port=%s client_id=%s attempt=%d",
-                 self._settings.host, self._settings.port, self._client_id, self._attempt + 1)
-        self._schedule_retry(client)
+        self._defer(self._loop_connected, self._will_tag)
 
     def _paho_disconnect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                          properties: Properties | None) -> None:
-        self._previous_unsent = False
-        self._schedule_retry(client)
-        self._to_loop(self._loop_disconnected, str(reason))
+        self._defer(self._loop_disconnected, str(reason))
 
     def _paho_message(self, client: paho.Client, userdata: object, message: paho.MQTTMessage) -> None:
         response_topic = correlation = None
@@ -279,32 +397,23 @@ class MqttConnection:
             correlation = getattr(props, "CorrelationData", None)
         msg = InboundMessage(message.topic, bytes(message.payload), bool(message.retain),
                              response_topic, correlation)
-        self._to_loop(self._on_message, msg)
+        self._defer(self._on_message, msg)
 
     def _paho_subscribe(self, client: paho.Client, userdata: object, mid: int,
                         reason_codes: list[ReasonCode], properties: Properties | None) -> None:
-        self._to_loop(self._resolve, mid, list(reason_codes))
+        self._resolve(mid, list(reason_codes))
 
     def _paho_publish(self, client: paho.Client, userdata: object, mid: int, reason: ReasonCode,
                       properties: Properties | None) -> None:
-        # Append first, then schedule a drain only if none is pending: the drain clears the flag before
-        # it empties the queue, so an ack appended meanwhile is either drained now or schedules another.
-        self._acks.append((mid, reason))
-        if not self._acks_scheduled:
-            self._acks_scheduled = True
-            if not self._to_loop(self._drain_acks):
-                self._acks_scheduled = False
+        self._resolve(mid, reason)
 
     # -- event loop side -------------------------------------------------------------------------------
 
-    def _drain_acks(self) -> None:
-        self._acks_scheduled = False
-        acks = self._acks
-        pending = self._pending
-        while acks:
-            mid, reason = acks.popleft()
-            if mid in pending:
-                self._resolve(mid, reason)
+    def _defer(self, func: Callable[..., None], *args: object) -> None:
+        """Run `func` in the next loop turn, outside paho's own call stack (it holds its callback lock)."""
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon(func, *args)
 
     def _resolve(self, mid: int, result: object) -> None:
         fut = self._pending.get(mid)
@@ -338,9 +447,10 @@ class MqttConnection:
             self._on_disconnected()
 
 
-def _set_retry_delay(client: paho.Client, first: float, cap: float) -> None:
-    # paho annotates int seconds but computes with floats; sub-second delays keep tests and LANs snappy
-    client.reconnect_delay_set(first, cap)  # type: ignore[arg-type]
+def _tls_pending(sock: Any) -> int:
+    """Bytes a TLS socket has decrypted but not handed out (0 for plain sockets and no socket)."""
+    pending = getattr(sock, "pending", None)
+    return int(pending()) if pending is not None else 0
 
 
 def response_properties(correlation_data: bytes | None) -> Properties:
