@@ -18,6 +18,7 @@ from pathlib import Path
 
 from edge import ConfigError, __version__
 from edge.collect.poller import MachinePoller, SessionFactory, default_session
+from edge.collect.tickgrid import TickGrid
 from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.publish.publisher import Publisher
@@ -76,6 +77,7 @@ class Daemon:
         self.spool = open_spool(self.state_dir, int(config.spool.max_bytes), config.spool.max_age_s)
         self.publisher = Publisher(publish_settings(config), spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
+        self.tick_grid = TickGrid()  # machines due in the same 10 ms slot share one loop turn
         self.commands = CommandService(config, self.publisher, self.pollers)
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
@@ -155,7 +157,7 @@ class Daemon:
     # ---- machines ------------------------------------------------------------------------------------
     def _start_machine(self, machine: MachineConfig) -> None:
         poller = MachinePoller(machine, self.config.alarms_for(machine), self.publisher, self.state_dir,
-                               self.session_factory)
+                               self.session_factory, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
         task.add_done_callback(self._poller_done)

@@ -45,6 +45,21 @@ class ChangeDetector:
         self._reported[sample.name] = sample
         return True
 
+    def report(self, name: str, value: object, kind: MetricType, timestamp_ms: int,
+               quality: Quality = Quality.GOOD) -> Sample | None:
+        """The sample to publish for this value (and remember it), or None when it is no change: the poll
+        tick's single pass, building a Sample only for what changed (most values of a tick do not)."""
+        previous = self._reported.get(name)
+        if previous is not None and previous.quality is quality and previous.type is kind:
+            old = previous.value
+            if old == value and type(old) is type(value):
+                return None
+            if not values_differ(old, value, self._deadbands.get(name, 0.0)):
+                return None
+        sample = Sample(name, value, kind, timestamp_ms, quality)
+        self._reported[name] = sample
+        return sample
+
     def would_report(self, name: str, value: object, quality: Quality, kind: MetricType) -> bool:
         """Whether a value would be reported, without remembering it (lets the poller build a Sample
         only for what changed: most values of a tick do not)."""

@@ -251,10 +251,26 @@ def _numbered_reads(machine: MachineConfig) -> list[PlannedRead]:
 
 def metric_values(read: PlannedRead, result: object) -> list[tuple[MetricSpec, object]]:
     """The (metric, value) pairs one successful read result gives, for the metrics the read declares."""
-    values = _extract(read.item, result)
-    if read.bits:
-        values = [bool(int(byte) >> bit & 1) for byte in values for bit in range(8)]  # type: ignore[call-overload]
-    return [(spec, _coerce(spec, value)) for spec, value in zip(read.metrics, values, strict=False)]
+    return list(zip(read.metrics, value_extractor(read)(result), strict=False))
+
+
+ValueExtractor = Callable[[object], list[object]]
+
+
+def value_extractor(read: PlannedRead) -> ValueExtractor:
+    """A function from the read's result to its metrics' values (in `read.metrics` order, each coerced to
+    its metric's type). Built once per read and session: a poll tick calls it for every read."""
+    item = read.item
+    coercers = [_COERCERS.get(spec.type, _unchanged) for spec in read.metrics]
+    bits = read.bits
+
+    def extract(result: object) -> list[object]:
+        values = _extract(item, result)
+        if bits:
+            values = [bool(int(byte) >> bit & 1) for byte in values for bit in range(8)]  # type: ignore[call-overload]
+        return [coerce(value) for coerce, value in zip(coercers, values, strict=False)]
+
+    return extract
 
 
 def _extract(item: it.ReadItem, result: object) -> list[object]:
@@ -288,19 +304,25 @@ def active_alarms_json(alarms: Sequence[ActiveAlarm]) -> str:
                        for a in alarms], separators=(",", ":"))
 
 
-_INT_TYPES = {MetricType.INT8, MetricType.INT16, MetricType.INT32, MetricType.INT64, MetricType.UINT8,
-              MetricType.UINT16, MetricType.UINT32, MetricType.UINT64}
+def _to_float(value: object) -> object:
+    """A Double/Float metric: ints (and bools) become floats; None and anything else pass."""
+    return float(value) if isinstance(value, int | float) else value
 
 
-def _coerce(spec: MetricSpec, value: object) -> object:
-    """Match the declared type (a REAL parameter published as Double, a count as an int)."""
-    if value is None:
-        return None
-    if spec.type in (MetricType.DOUBLE, MetricType.FLOAT) and isinstance(value, int | float):
-        return float(value)
-    if spec.type in _INT_TYPES and isinstance(value, float) and value.is_integer():
-        return int(value)
+def _to_int(value: object) -> object:
+    """An integer metric: a whole float (a REAL parameter holding a count) becomes an int."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def _unchanged(value: object) -> object:
     return value
+
+
+_COERCERS: dict[MetricType, Callable[[object], object]] = {
+    MetricType.DOUBLE: _to_float, MetricType.FLOAT: _to_float,
+    **dict.fromkeys((MetricType.INT8, MetricType.INT16, MetricType.INT32, MetricType.INT64, MetricType.UINT8,
+                     MetricType.UINT16, MetricType.UINT32, MetricType.UINT64), _to_int),
+}
 
 
 # ---- when groups are due ---------------------------------------------------------------------------

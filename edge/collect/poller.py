@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import enum
 import json
 import logging
 import random
@@ -27,6 +28,7 @@ from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker
+from edge.collect.tickgrid import TickGrid
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.connect import open_session
@@ -86,6 +88,36 @@ class TickResult:
     history: list[AlarmHistoryEntry]  # new alarm-history entries, oldest first
 
 
+class ReadKind(enum.Enum):
+    """What a tick does with a read's result beyond publishing its values."""
+
+    VALUES = "values"
+    ALARM_STATUS = "alarm_status"  # also decides whether the active alarms are read
+    ALARM_HISTORY = "alarm_history"  # published as events, not values
+
+
+_NOTHING = object()  # no previous result (compares unequal to any result)
+
+
+@dataclass(frozen=True, slots=True)
+class TickBatch:
+    """One combination of due groups, prepared once per plan: the reads, the request items (the clock
+    last; a stable tuple, so the client reuses its encoded request), and per read its kind and extractor."""
+
+    reads: tuple[pl.PlannedRead, ...]
+    items: tuple[it.ReadItem, ...]
+    kinds: tuple[ReadKind, ...]
+    extractors: tuple[pl.ValueExtractor, ...]
+
+    @classmethod
+    def build(cls, reads: Sequence[pl.PlannedRead]) -> TickBatch:
+        kinds = tuple(ReadKind.ALARM_STATUS if isinstance(r.item, it.ReadAlarmStatus)
+                      else ReadKind.ALARM_HISTORY if isinstance(r.item, it.ReadAlarmHistory)
+                      else ReadKind.VALUES for r in reads)
+        return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
+                   tuple(pl.value_extractor(r) for r in reads))
+
+
 SessionFactory = Callable[[MachineConfig], CncSession]
 
 
@@ -100,7 +132,8 @@ class MachinePoller:
     """Owns one machine's session and polling task; `run()` until cancelled, `close()` after."""
 
     def __init__(self, machine: MachineConfig, alarms: AlarmsConfig, sink: DeviceSink, state_dir: Path,
-                 session_factory: SessionFactory = default_session, jitter_s: float = 1.0) -> None:
+                 session_factory: SessionFactory = default_session, jitter_s: float = 1.0,
+                 grid: TickGrid | None = None) -> None:
         self.machine = machine
         self.alarms_config = alarms
         self.sink = sink
@@ -116,6 +149,10 @@ class MachinePoller:
         self._history = AlarmHistoryDedup(history_store)
         self._dropped: set[str] = set()
         self._plan: pl.MachinePlan | None = None
+        self._grid = grid or TickGrid()
+        self._batches: dict[frozenset[pl.Group], TickBatch] = {}
+        self._batches_plan: pl.MachinePlan | None = None
+        self._last_raw: dict[int, object] = {}  # id(read) -> its last good result (reads that did not move)
         self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
         self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
 
@@ -201,11 +238,12 @@ class MachinePoller:
         schedule.start(time.monotonic())
         schedule.due(time.monotonic())  # static group already read above
         self._changes = ChangeDetector(plan.deadbands())
+        self._last_raw.clear()
         first = await self._tick(plan, set(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
-        first.samples.extend(self._static_samples(plan, first.samples))
-        first.samples.append(self._dropped_sample(first.samples))
-        await self.sink.device_online(self.machine_id, specs, self._changes.filter(first.samples))
+        extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
+        born = [*first.samples, *self._changes.filter(extra)]
+        await self.sink.device_online(self.machine_id, specs, born)
         self.online = True
         self.session_up.set()
         if first.events or first.history:
@@ -213,7 +251,7 @@ class MachinePoller:
         fastest = min(plan.periods.values())
         while True:
             next_due = schedule.next_due() or time.monotonic() + fastest
-            await asyncio.sleep(max(0.0, next_due - time.monotonic()))
+            await self._grid.sleep_until(next_due)
             started = time.monotonic()
             groups = schedule.due(started)
             self.stats.skipped = schedule.skipped
@@ -221,9 +259,8 @@ class MachinePoller:
                 continue
             plan = self._plan or plan
             tick = await self._tick(plan, groups)
-            changed = self._changes.filter(tick.samples)
-            if changed:
-                await self.sink.device_data(self.machine_id, changed)
+            if tick.samples:  # already change-filtered
+                await self.sink.device_data(self.machine_id, tick.samples)
             if tick.events or tick.history:
                 await self._emit_events(tick.events, tick.history)
             elapsed = time.monotonic() - started
@@ -258,13 +295,23 @@ class MachinePoller:
                      self.machine_id, operation, capabilities.transport)
         return missing
 
+    def _batch_for(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickBatch:
+        """The reads of the due groups plus the clock, built once per plan and combination of groups."""
+        if self._batches_plan is not plan:
+            self._batches.clear()
+            self._batches_plan = plan
+        key = frozenset(groups)
+        batch = self._batches.get(key)
+        if batch is None:
+            batch = TickBatch.build(plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC}))
+            self._batches[key] = batch
+        return batch
+
     async def _tick(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickResult:
-        """One batched round trip for the due groups."""
-        reads = plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})
-        items: list[it.ReadItem] = [r.item for r in reads]
-        items.append(it.ReadClock())
+        """One batched round trip for the due groups; the samples returned are the changes only."""
+        batch = self._batch_for(plan, groups)
         wall_before, mono_before = time.time(), time.monotonic()
-        results = await self.session.batch(items)
+        results = await self.session.batch(batch.items)
         mono_after, wall_after = time.monotonic(), time.time()
         self.last_progress = mono_after
         self.stats.ticks += 1
@@ -276,23 +323,29 @@ class MachinePoller:
         samples: list[Sample] = []
         events: list[Sample] = []
         alarm_status: int | None = None
-        would_report = self._changes.would_report
         history: list[AlarmHistoryEntry] | None = None
-        for read, result in zip(reads, results, strict=False):
+        last_raw = self._last_raw
+        report = self._changes.report
+        for read, kind, extract, result in zip(batch.reads, batch.kinds, batch.extractors, results, strict=False):
+            key = id(read)
             if isinstance(result, FocasError):
+                last_raw.pop(key, None)
                 self._item_failed(read, result, timestamp, samples)
                 continue
-            if isinstance(read.item, it.ReadAlarmStatus):
+            if kind is ReadKind.ALARM_STATUS:
                 alarm_status = int(result)
-            if isinstance(read.item, it.ReadAlarmHistory):
+            elif kind is ReadKind.ALARM_HISTORY:
                 history = list(result)
                 continue
+            if last_raw.get(key, _NOTHING) == result:
+                continue  # nothing this read feeds has moved since the last tick
+            last_raw[key] = result
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
-            # Only what the change detector would report becomes a Sample (most values do not move).
-            samples.extend(Sample(spec.name, value, spec.type, timestamp)
-                           for spec, value in pl.metric_values(read, result)
-                           if would_report(spec.name, value, Quality.GOOD, spec.type))
-        samples.extend(self._clock_samples(timestamp))
+            for spec, value in zip(read.metrics, extract(result), strict=False):
+                sample = report(spec.name, value, spec.type, timestamp)
+                if sample is not None:
+                    samples.append(sample)
+        self._clock_samples(timestamp, samples)
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
@@ -312,13 +365,16 @@ class MachinePoller:
             self.stats.count_error(result)
         return self.clock.source_time_ms(mid_mono, mid_wall)
 
-    def _clock_samples(self, timestamp: int) -> list[Sample]:
+    def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
         skew = self.clock.skew_s
-        return [
-            Sample(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
+        report = self._changes.report
+        for sample in (
+            report(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
                    timestamp, Quality.GOOD if skew is not None else Quality.BAD),
-            Sample(pl.CLOCK_GATEWAY.name, self.clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
-        ]
+            report(pl.CLOCK_GATEWAY.name, self.clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
+        ):
+            if sample is not None:
+                samples.append(sample)
 
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
@@ -330,8 +386,12 @@ class MachinePoller:
                 self._plan = self._plan.without(operation)
                 log.warning("dropped from plan machine=%s operation=%s error=%s", self.machine_id,
                             operation, error)
-                samples.append(self._dropped_sample(samples, timestamp))
-        samples.extend(Sample(spec.name, None, spec.type, timestamp, Quality.BAD) for spec in read.metrics)
+                samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
+        report = self._changes.report
+        for spec in read.metrics:
+            sample = report(spec.name, None, spec.type, timestamp, Quality.BAD)
+            if sample is not None:
+                samples.append(sample)
 
     def _dropped_sample(self, samples: Sequence[Sample], timestamp: int | None = None) -> Sample:
         when = timestamp if timestamp is not None else (samples[0].timestamp_ms if samples else
@@ -349,8 +409,8 @@ class MachinePoller:
             self._item_failed(reads[0], result, timestamp, samples)
             return []
         alarms: list[ActiveAlarm] = list(result)
-        samples.extend(Sample(spec.name, value, spec.type, timestamp)
-                       for spec, value in pl.metric_values(reads[0], alarms))
+        samples.extend(self._changes.filter(Sample(spec.name, value, spec.type, timestamp)
+                                            for spec, value in pl.metric_values(reads[0], alarms)))
         return [Sample(pl.ALARM_EVENT.name, json.dumps(event.as_dict(), separators=(",", ":")),
                        pl.ALARM_EVENT.type, timestamp)
                 for event in self._alarms.update(alarms, timestamp)]

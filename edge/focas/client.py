@@ -15,6 +15,7 @@ import logging
 import struct
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from datetime import date, datetime
 
 from edge.focas import functions as fn
@@ -27,6 +28,8 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import (
+    Answer,
+    Echo,
     Frame,
     FrameDecoder,
     PduType,
@@ -36,10 +39,11 @@ from edge.focas.frame import (
     encode_close_request,
     encode_open_request,
     encode_request,
+    split_response,
 )
 from edge.focas.functions import Context, Function
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, item_result, plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, item_value, plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -53,6 +57,24 @@ CLOSE_TIMEOUT = 1.0
 READ_SIZE = 65536
 WRITE_OPERATIONS = frozenset({"write_macro", "write_pmc", "set_clock"})
 PLAN_CACHE_SIZE = 1024  # a poll plan repeats the same few dozen items every tick
+PREPARED_CACHE_SIZE = 16  # a poller repeats one or a few item tuples (one per combination of due groups)
+
+
+@dataclass(frozen=True, slots=True)
+class PreparedPdu:
+    """One request PDU of a batch, encoded, with what each answer must echo and the items it serves."""
+
+    data: bytes
+    requests: tuple[RequestSubpacket, ...]
+    echoes: tuple[Echo, ...]
+    items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
+
+
+@dataclass(frozen=True, slots=True)
+class PreparedBatch:
+    items: Sequence[it.ReadItem]
+    context: Context
+    pdus: tuple[PreparedPdu, ...]
 
 
 class FocasClient(CncSession):
@@ -79,6 +101,7 @@ class FocasClient(CncSession):
         self._pending: deque[Frame] = deque()
         self._in_flight = False
         self._plans: dict[tuple[it.ReadItem, Context], ItemPlan] = {}
+        self._prepared: dict[int, PreparedBatch] = {}
 
     def describe(self) -> str:
         return f"focas://{self.host}:{self.port}"
@@ -125,16 +148,15 @@ class FocasClient(CncSession):
                 await writer.wait_closed()
 
     async def _batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
-        plans = [self._plan(item) for item in items]
-        results: list[ItemResult] = [None] * len(plans)
-        for group in self._groups(plans):
-            requests = [req for _, plan in group for req in plan.requests]
-            answers = await self._exchange(requests) if requests else []
+        prepared = self._prepare(items)
+        results: list[ItemResult] = [None] * len(items)
+        context = self.context
+        for pdu in prepared.pdus:
+            answers = await self._exchange_prepared(pdu) if pdu.echoes else []
             offset = 0
-            for index, plan in group:
-                count = len(plan.calls)
-                results[index] = item_result(plan, answers[offset : offset + count], self.context)
-                offset += count
+            for index, plan in pdu.items:
+                results[index] = item_value(plan, answers, offset, context)
+                offset += len(plan.calls)
         return results
 
     async def _write_macro(self, number: int, value: float) -> None:
@@ -186,6 +208,31 @@ class FocasClient(CncSession):
             self._plans[key] = plan
         return plan
 
+    def _prepare(self, items: Sequence[it.ReadItem]) -> PreparedBatch:
+        """The batch's PDUs; built once per tuple of items a caller repeats (a poller's tick), per session.
+
+        Only tuples are kept (a list could change under the cache); the cache pins the tuple, so its
+        identity cannot be reused by another object while the entry lives.
+        """
+        if type(items) is not tuple:
+            return self._build_batch(items)
+        prepared = self._prepared.get(id(items))
+        if prepared is None or prepared.items is not items or prepared.context is not self.context:
+            prepared = self._build_batch(items)
+            if len(self._prepared) >= PREPARED_CACHE_SIZE:
+                self._prepared.clear()
+            self._prepared[id(items)] = prepared
+        return prepared
+
+    def _build_batch(self, items: Sequence[it.ReadItem]) -> PreparedBatch:
+        plans = [self._plan(item) for item in items]
+        pdus = []
+        for group in self._groups(plans):
+            requests = [req for _, plan in group for req in plan.requests]
+            pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests),
+                                    tuple((req.cls, req.path, req.command) for req in requests), tuple(group)))
+        return PreparedBatch(items, self.context, tuple(pdus))
+
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
         """Items in order, packed into PDUs of at most max_subpackets subpackets."""
         groups: list[list[tuple[int, ItemPlan]]] = [[]]
@@ -217,6 +264,14 @@ class FocasClient(CncSession):
                                     f"{req.path} command 0x{req.command:04x}, got class {sub.cls} path "
                                     f"{sub.path} command 0x{sub.command:04x}")
         return answers
+
+    async def _exchange_prepared(self, pdu: PreparedPdu) -> list[Answer]:
+        """One prepared 0x2101 out, its (rc, detail, payload) answers back; count and echoes checked."""
+        frame = await self._roundtrip(pdu.data, PduType.DATA_RESPONSE, "data request")
+        try:
+            return split_response(frame.body, pdu.echoes)
+        except ProtocolError as exc:
+            raise ProtocolError(f"{self.describe()}: {exc}") from None
 
     async def _roundtrip(self, data: bytes, expected: PduType, what: str) -> Frame:
         if self._writer is None:

@@ -186,6 +186,48 @@ def decode_response_body(body: bytes) -> list[ResponseSubpacket]:
     return result
 
 
+Answer = tuple[int, int, bytes]  # one response subpacket reduced to (rc, detail, payload)
+Echo = tuple[int, int, int]  # what a response subpacket must echo: (class, path, command)
+
+
+def split_response(body: bytes, echoes: Sequence[Echo]) -> list[Answer]:
+    """The answers in a 0x2102 body to requests the caller knows: one (rc, detail, payload) per request.
+
+    The client's hot path (one call per poll tick): the same checks as decode_response_body plus the
+    count and every echo against `echoes`, in one pass and without building subpacket objects.
+    """
+    size = len(body)
+    if size < 2:
+        raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {size}-byte body")
+    (count,) = _U16.unpack_from(body, 0)
+    if count != len(echoes):
+        raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
+    answers: list[Answer] = []
+    offset = 2
+    unpack = _RESPONSE_SUB.unpack_from
+    for index, echo in enumerate(echoes):
+        if offset + RESPONSE_SUBPACKET_FIXED > size:
+            raise ProtocolError(f"data response: count says {count} subpackets but the body ends after "
+                                f"{index} (at byte {offset} of {size})")
+        length, cls, path, command, rc, detail, _pad, payload_size = unpack(body, offset)
+        if length < RESPONSE_SUBPACKET_FIXED or offset + length > size:
+            raise ProtocolError(f"data response: subpacket {index} declares {length} bytes at offset {offset} "
+                                f"but only {size - offset} remain (minimum {RESPONSE_SUBPACKET_FIXED})")
+        if payload_size != length - RESPONSE_SUBPACKET_FIXED:
+            raise ProtocolError(f"data response: subpacket {index} (command 0x{command:04x}) announces a "
+                                f"{payload_size}-byte payload but its length {length} leaves room for "
+                                f"{length - RESPONSE_SUBPACKET_FIXED}")
+        if (cls, path, command) != echo:
+            raise ProtocolError(f"subpacket {index} should echo class {echo[0]} path {echo[1]} command "
+                                f"0x{echo[2]:04x}, got class {cls} path {path} command 0x{command:04x}")
+        answers.append((rc, detail, body[offset + RESPONSE_SUBPACKET_FIXED : offset + length]))
+        offset += length
+    if offset != size:
+        raise ProtocolError(f"data response: {size - offset} bytes left after the {count} subpackets the "
+                            f"count announced")
+    return answers
+
+
 # ---- whole PDUs -----------------------------------------------------------------------------------------
 
 

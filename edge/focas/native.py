@@ -14,8 +14,8 @@ from typing import Any
 
 from edge.focas import functions as fn
 from edge.focas import items as it
-from edge.focas.errors import FocasError, NotSupported, OutOfRange
-from edge.focas.frame import RequestSubpacket, ResponseSubpacket
+from edge.focas.errors import FocasError, NotSupported, OutOfRange, ProtocolError, cnc_error
+from edge.focas.frame import Answer, RequestSubpacket, ResponseSubpacket
 from edge.focas.functions import Context, Function
 from edge.focas.values import SlotForm
 
@@ -138,11 +138,24 @@ def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
 
 def item_result(plan: ItemPlan, answers: Sequence[ResponseSubpacket], ctx: Context) -> Any:
     """The item's value, or the FocasError this item alone got (CNC return code or a bad payload)."""
+    return item_value(plan, [(sub.rc, sub.detail, sub.payload) for sub in answers], 0, ctx)
+
+
+def item_value(plan: ItemPlan, answers: Sequence[Answer], offset: int, ctx: Context) -> Any:
+    """As item_result, from the (rc, detail, payload) answers of a whole PDU, this item's at `offset`."""
     if plan.error is not None:
         return plan.error
+    calls = plan.calls
+    if len(answers) < offset + len(calls):
+        return ProtocolError(f"{plan.item.operation}: {len(calls)} answer(s) expected at {offset}, "
+                             f"{len(answers)} in the PDU")
     try:
-        values = [function.decode_response(sub, req, ctx)
-                  for (function, req), sub in zip(plan.calls, answers, strict=True)]
+        values = []
+        for index, (function, req) in enumerate(calls):
+            rc, detail, payload = answers[offset + index]
+            if rc != 0:
+                return cnc_error(rc, function.name, detail)
+            values.append(function.decode_payload(payload, req, ctx))
         return plan.combine(values)
     except FocasError as exc:
         return exc
