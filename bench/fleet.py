@@ -117,6 +117,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     overruns_before = subscriber.overruns or 0
     sims_before = [sim.stats() for sim in sims]
     cpu_before = daemon.cpu_seconds()
+    sys_before = daemon.system_seconds()
     broker_before = _cpu(broker)
     spy = None
     if options.spy_to is not None:
@@ -131,6 +132,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         time.sleep(min(1.0, max(0.0, options.duration_s - (time.monotonic() - started))))
     elapsed = time.monotonic() - started
     cpu = daemon.cpu_seconds() - cpu_before
+    sys_cpu = daemon.system_seconds() - sys_before
     sims_after = [sim.stats() for sim in sims]
     subscriber.recording = False
     rss.append(daemon.rss_bytes())
@@ -144,6 +146,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     return {
         "machines": options.machines,
         "cpu_us_per_cycle": cpu / cycles * 1e6 if cycles else float("nan"),
+        "sys_us_per_cycle": sys_cpu / cycles * 1e6 if cycles else float("nan"),
         "gateway_cores": cpu / elapsed,
         "rss_mb": max(rss) / 1e6,
         "cycles_per_s": cycles / elapsed,
@@ -169,7 +172,7 @@ def _cpu(process: psutil.Process | None) -> float:
     return float(times.user + times.system)
 
 
-SUMMARY_KEYS = ("cpu_us_per_cycle", "gateway_cores", "rss_mb", "cycles_per_s", "achieved_pct", "overruns",
+SUMMARY_KEYS = ("cpu_us_per_cycle", "sys_us_per_cycle", "gateway_cores", "rss_mb", "cycles_per_s", "achieved_pct", "overruns",
                 "change_p50_ms", "change_p99_ms", "sample_p50_ms", "sample_p99_ms", "sim_cores", "broker_cores",
                 "host_cpu_pct")
 

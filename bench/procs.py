@@ -83,6 +83,10 @@ class DaemonProcess:
         times = self.process.cpu_times()
         return float(times.user + times.system)
 
+    def system_seconds(self) -> float:
+        """The kernel's share (socket syscalls, epoll): what no Python change can take away."""
+        return float(self.process.cpu_times().system)
+
     def rss_bytes(self) -> int:
         return int(self.process.memory_info().rss)
 

@@ -52,9 +52,14 @@ class ChangeDetector:
         previous = self._reported.get(name)
         if previous is not None and previous.quality is quality and previous.type is kind:
             old = previous.value
-            if old == value and type(old) is type(value):
+            same_type = type(old) is type(value)
+            if same_type and old == value:
                 return None
-            if not values_differ(old, value, self._deadbands.get(name, 0.0)):
+            band = self._deadbands.get(name, 0.0)
+            if same_type and type(value) is float and not band:  # a moving position, feed or speed
+                if value != value and old != old:  # NaN stays NaN: no change
+                    return None
+            elif not values_differ(old, value, band):
                 return None
         sample = Sample(name, value, kind, timestamp_ms, quality)
         self._reported[name] = sample

@@ -337,8 +337,10 @@ class MachinePoller:
             elif kind is ReadKind.ALARM_HISTORY:
                 history = list(result)
                 continue
-            if last_raw.get(key, _NOTHING) == result:
-                continue  # nothing this read feeds has moved since the last tick
+            previous = last_raw.get(key, _NOTHING)
+            if previous is result or previous == result:
+                continue  # nothing this read feeds has moved since the last tick (the client hands an
+                # unchanged answer's value back as the same object)
             last_raw[key] = result
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
             for spec, value in zip(read.metrics, extract(result), strict=False):

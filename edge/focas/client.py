@@ -22,6 +22,7 @@ from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.errors import (
     ConnectionLost,
+    FocasError,
     NotSupported,
     OutOfRange,
     ProtocolError,
@@ -54,10 +55,74 @@ DEFAULT_PORT = 8193
 # a typical poll in one PDU while bounding the answer (32 x 30i parameter records = 8.7 KB).
 MAX_SUBPACKETS = 32
 CLOSE_TIMEOUT = 1.0
-READ_SIZE = 65536
 WRITE_OPERATIONS = frozenset({"write_macro", "write_pmc", "set_clock"})
 PLAN_CACHE_SIZE = 1024  # a poll plan repeats the same few dozen items every tick
 PREPARED_CACHE_SIZE = 16  # a poller repeats one or a few item tuples (one per combination of due groups)
+
+
+class FrameStream(asyncio.Protocol):
+    """The TCP connection as a stream of whole frames: bytes are decoded as they arrive (no stream
+    reader in between), and the one task waiting for an answer is woken when a frame is complete."""
+
+    def __init__(self, peer: str) -> None:
+        self.peer = peer
+        self.transport: asyncio.Transport | None = None
+        self._decoder = FrameDecoder()
+        self._frames: deque[Frame] = deque()
+        self._waiter: asyncio.Future[None] | None = None
+        self._error: ProtocolError | None = None
+        self._lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            self._frames.extend(self._decoder.feed(data))
+        except ProtocolError as exc:
+            self._error = ProtocolError(f"{self.peer}: {exc}")
+        self._wake()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if not self._lost.done():
+            self._lost.set_result(None)
+        self._wake()
+
+    def _wake(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def send(self, data: bytes) -> None:
+        if self.transport is None or self._lost.done():
+            raise ConnectionLost(f"{self.peer}: not connected")
+        self.transport.write(data)
+
+    async def next_frame(self) -> Frame:
+        while not self._frames:
+            if self._error is not None:
+                raise self._error
+            if self._lost.done():
+                raise ConnectionLost(f"{self.peer}: peer closed the connection "
+                                     f"({self._decoder.buffered} bytes of a frame pending)")
+            self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await self._waiter
+            finally:
+                self._waiter = None
+        return self._frames.popleft()
+
+    def clear(self) -> None:
+        """Forget frames nobody waits for any more (a new session starts)."""
+        self._frames.clear()
+
+    async def close(self, timeout: float) -> None:
+        if self.transport is not None:
+            self.transport.close()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout):
+                await asyncio.shield(self._lost)
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,9 +137,15 @@ class PreparedPdu:
 
 @dataclass(frozen=True, slots=True)
 class PreparedBatch:
+    """A batch a caller repeats: its PDUs, and per item the last answer bytes with the value decoded
+    from them. Decoding is a pure function of (answer, request, context), so an item whose answer bytes
+    repeat gets the very same value object back without decoding (most reads of a poll tick do not
+    change), and a caller can tell "unchanged" by identity."""
+
     items: Sequence[it.ReadItem]
     context: Context
     pdus: tuple[PreparedPdu, ...]
+    last: list[tuple[object, ItemResult] | None]  # per item: (its answers, its value); errors not kept
 
 
 class FocasClient(CncSession):
@@ -95,10 +166,7 @@ class FocasClient(CncSession):
         self.max_subpackets = max_subpackets
         self.context = Context()
         self.pdus_sent = 0
-        self._reader: asyncio.StreamReader | None = None
-        self._writer: asyncio.StreamWriter | None = None
-        self._decoder = FrameDecoder()
-        self._pending: deque[Frame] = deque()
+        self._stream: FrameStream | None = None
         self._in_flight = False
         self._plans: dict[tuple[it.ReadItem, Context], ItemPlan] = {}
         self._prepared: dict[int, PreparedBatch] = {}
@@ -113,9 +181,9 @@ class FocasClient(CncSession):
     # ---- session hooks ----------------------------------------------------------------------------------
     async def _open(self) -> SysInfo:
         await self._close()
-        self._reader, self._writer = await asyncio.open_connection(self.host, self.port)
-        self._decoder = FrameDecoder()
-        self._pending.clear()
+        loop = asyncio.get_running_loop()
+        peer = self.describe()
+        _, self._stream = await loop.create_connection(lambda: FrameStream(peer), self.host, self.port)
         self._in_flight = False
         await self._roundtrip(encode_open_request(), PduType.OPEN_RESPONSE, "open")
         self.context = Context()
@@ -130,33 +198,42 @@ class FocasClient(CncSession):
         return info
 
     async def _close(self) -> None:
-        reader, writer = self._reader, self._writer
-        self._reader = self._writer = None
-        if writer is None or reader is None:
+        stream, self._stream = self._stream, None
+        if stream is None:
             return
         healthy = not self._in_flight
         self._in_flight = False
         try:
             if healthy:
                 async with asyncio.timeout(CLOSE_TIMEOUT):
-                    await self._say_goodbye(reader, writer)
+                    await self._say_goodbye(stream)
         except Exception as exc:  # closing must never raise
             log.debug("close PDU not acknowledged peer=%s error=%r", self.describe(), exc)
-        writer.close()
         with contextlib.suppress(Exception):
-            async with asyncio.timeout(CLOSE_TIMEOUT):
-                await writer.wait_closed()
+            await stream.close(CLOSE_TIMEOUT)
 
     async def _batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
         prepared = self._prepare(items)
         results: list[ItemResult] = [None] * len(items)
         context = self.context
+        last = prepared.last
         for pdu in prepared.pdus:
             answers = await self._exchange_prepared(pdu) if pdu.echoes else []
             offset = 0
             for index, plan in pdu.items:
-                results[index] = item_value(plan, answers, offset, context)
-                offset += len(plan.calls)
+                count = len(plan.calls)
+                if not count:  # nothing was asked (the plan itself is the item's error)
+                    results[index] = item_value(plan, answers, offset, context)
+                    continue
+                key = answers[offset] if count == 1 else tuple(answers[offset : offset + count])
+                previous = last[index]
+                if previous is not None and previous[0] == key:
+                    results[index] = previous[1]
+                else:
+                    value = item_value(plan, answers, offset, context)
+                    results[index] = value
+                    last[index] = None if isinstance(value, FocasError) else (key, value)
+                offset += count
         return results
 
     async def _write_macro(self, number: int, value: float) -> None:
@@ -231,7 +308,7 @@ class FocasClient(CncSession):
             requests = [req for _, plan in group for req in plan.requests]
             pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests),
                                     tuple((req.cls, req.path, req.command) for req in requests), tuple(group)))
-        return PreparedBatch(items, self.context, tuple(pdus))
+        return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))
 
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
         """Items in order, packed into PDUs of at most max_subpackets subpackets."""
@@ -274,37 +351,22 @@ class FocasClient(CncSession):
             raise ProtocolError(f"{self.describe()}: {exc}") from None
 
     async def _roundtrip(self, data: bytes, expected: PduType, what: str) -> Frame:
-        if self._writer is None:
+        stream = self._stream
+        if stream is None:
             raise ConnectionLost(f"{self.describe()}: not connected")
         self._in_flight = True
-        self._writer.write(data)
-        await self._writer.drain()
+        stream.send(data)
         self.pdus_sent += 1
-        frame = await self._receive(self._reader)
+        frame = await stream.next_frame()
         if frame.type != expected:
             raise ProtocolError(f"{self.describe()}: {what}: expected a 0x{int(expected):04x} frame, "
                                 f"got type 0x{frame.type:04x} ({len(frame.body)} body bytes)")
         self._in_flight = False
         return frame
 
-    async def _receive(self, reader: asyncio.StreamReader | None) -> Frame:
-        while not self._pending:
-            if reader is None:
-                raise ConnectionLost(f"{self.describe()}: not connected")
-            data = await reader.read(READ_SIZE)
-            if not data:
-                raise ConnectionLost(f"{self.describe()}: peer closed the connection "
-                                     f"({self._decoder.buffered} bytes of a frame pending)")
-            try:
-                self._pending.extend(self._decoder.feed(data))
-            except ProtocolError as exc:
-                raise ProtocolError(f"{self.describe()}: {exc}") from None
-        return self._pending.popleft()
-
-    async def _say_goodbye(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        writer.write(encode_close_request())
-        await writer.drain()
+    async def _say_goodbye(self, stream: FrameStream) -> None:
+        stream.send(encode_close_request())
         while True:
-            frame = await self._receive(reader)
+            frame = await stream.next_frame()
             if frame.type == PduType.CLOSE_RESPONSE:
                 return
