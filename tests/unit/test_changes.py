@@ -90,3 +90,23 @@ def test_reported_values_track_within_deadband(values: list[float], deadband: fl
         reported = detector.last_reported()["x"].value
         assert isinstance(reported, float)
         assert abs(reported - value) <= deadband
+
+
+_values = st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True), st.integers(-5, 5),
+                    st.booleans(), st.sampled_from(["a", "b"]), st.sampled_from([0.0, 1.0, 1.5, -1.5]))
+_offers = st.lists(st.tuples(st.sampled_from(["p", "q"]), _values, st.sampled_from(list(Quality)),
+                             st.sampled_from([MetricType.DOUBLE, MetricType.INT32, MetricType.STRING])),
+                   max_size=40)
+
+
+@given(_offers, st.sampled_from([0.0, 0.5]))
+def test_property_report_decides_exactly_as_offer(offers: list[tuple[str, object, Quality, MetricType]],
+                                                 band: float) -> None:
+    """The poll tick's single-pass report() must publish exactly what offer() would."""
+    by_offer, by_report = ChangeDetector({"p": band}), ChangeDetector({"p": band})
+    for t, (name, value, quality, kind) in enumerate(offers):
+        offered = by_offer.offer(Sample(name, value, kind, t, quality))
+        reported = by_report.report(name, value, kind, t, quality)
+        assert offered == (reported is not None)
+        assert reported is None or reported == Sample(name, value, kind, t, quality)
+    assert by_offer.last_reported() == by_report.last_reported()

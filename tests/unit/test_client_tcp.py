@@ -364,3 +364,48 @@ def test_open_session_and_addresses() -> None:
     with pytest.raises(ConfigError, match="expected one of focas, packed"):
         open_session("serial", "x")
 
+
+
+async def test_a_repeated_batch_reuses_its_request_and_unchanged_values(cnc: ScriptedCnc) -> None:
+    batch = (it.ReadMacros(500, 501), it.ReadFeed(), it.ReadClock())  # a tuple: the poller's form
+    async with client_for(cnc) as client:
+        first = await client.batch(batch)
+        second = await client.batch(batch)
+        cnc.macros[500] = 2.5
+        third = await client.batch(batch)
+    assert cnc.requests[-1] == cnc.requests[-2] == cnc.requests[-3]  # same subpackets every time
+    assert second[0] is first[0] and second[1] == first[1]  # same answer bytes: the same value object
+    assert third[0] == [2.5, None] and third[0] is not first[0]  # changed bytes: decoded afresh
+    assert first[0] == [1.25, None]
+
+
+async def test_a_list_batch_is_decoded_every_time(cnc: ScriptedCnc) -> None:
+    batch = [it.ReadMacros(500, 501)]  # a list may change between calls: never cached
+    async with client_for(cnc) as client:
+        first = await client.batch(batch)
+        batch[0] = it.ReadMacros(501, 501)
+        second = await client.batch(batch)
+    assert first[0] == [1.25, None] and second[0] == [None]
+
+
+async def test_an_item_error_is_not_remembered_as_a_value(cnc: ScriptedCnc) -> None:
+    batch = (it.ReadMacros(500, 501), it.ReadFeed())
+    async with client_for(cnc) as client:
+        cnc.errors[fn.ACTUAL_FEED.command] = EW_FUNC
+        failed = await client.batch(batch)
+        cnc.errors.clear()
+        recovered = await client.batch(batch)
+    assert isinstance(failed[1], FunctionNotAvailable) and failed[0] == [1.25, None]
+    assert recovered[1] == 1250.5
+
+
+async def test_a_new_session_prepares_its_batches_again(cnc: ScriptedCnc) -> None:
+    batch = (it.ReadParams(6711, 6711),)
+    async with client_for(cnc) as client:
+        before = await client.batch(batch)
+        await client.reset()
+        cnc.sysinfo, cnc.ctx = SYSINFO_31I, Context.from_sysinfo(SYSINFO_31I)
+        await client.connect()
+        after = await client.batch(batch)
+    assert before == after == [[ParamRecord(6711, 0, 3, (67110,))]]
+    assert [req.command for req in cnc.requests[-1]] == [0x8D]  # the 30i form, not the cached 0x0e PDU

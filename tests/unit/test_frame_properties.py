@@ -7,6 +7,7 @@ import contextlib
 import time
 from typing import Any
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -19,6 +20,7 @@ from edge.focas.frame import (
     decode_response_body,
     encode_request,
     encode_response,
+    split_response,
 )
 from edge.focas.functions import BY_COMMAND, Context
 from edge.focas.values import SlotForm
@@ -129,3 +131,34 @@ def test_header_with_any_length_never_overbuffers(length: int, tail: bytes) -> N
         assert length <= 1024
         assert decoder.buffered == (0 if frames else 10 + len(body))
         assert len(frames) == (1 if len(body) == length else 0)
+
+
+@given(st.lists(response_subpackets, max_size=8))
+def test_property_split_response_agrees_with_decode_response_body(subs: list[ResponseSubpacket]) -> None:
+    body = encode_response(subs)[10:]
+    echoes = [(sub.cls, sub.path, sub.command) for sub in subs]
+    assert split_response(body, echoes) == [(s.rc, s.detail, s.payload) for s in decode_response_body(body)]
+
+
+@given(st.lists(response_subpackets, min_size=1, max_size=4), st.data())
+def test_property_split_response_rejects_a_wrong_echo_or_count(subs: list[ResponseSubpacket],
+                                                                data: st.DataObject) -> None:
+    body = encode_response(subs)[10:]
+    echoes = [(sub.cls, sub.path, sub.command) for sub in subs]
+    index = data.draw(st.integers(0, len(echoes) - 1))
+    cls, path, command = echoes[index]
+    wrong = [*echoes[:index], (cls, path, (command + 1) & 0xFFFF), *echoes[index + 1:]]
+    with pytest.raises(ProtocolError, match="should echo"):
+        split_response(body, wrong)
+    with pytest.raises(ProtocolError, match="subpackets in the answer"):
+        split_response(body, echoes[:-1])
+
+
+@given(st.lists(response_subpackets, min_size=1, max_size=4), st.integers(1, 40))
+def test_property_split_response_rejects_a_truncated_body(subs: list[ResponseSubpacket], cut: int) -> None:
+    body = encode_response(subs)[10:]
+    echoes = [(sub.cls, sub.path, sub.command) for sub in subs]
+    with pytest.raises(ProtocolError):
+        split_response(body[: max(0, len(body) - cut)], echoes)
+    with pytest.raises(ProtocolError, match="left after"):
+        split_response(body + b"\x00", echoes)

@@ -1,0 +1,61 @@
+"""The shared poll grid: wake-ups on grid points, never early, one timer per slot, sleepers independent."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from edge.collect.tickgrid import TickGrid
+
+
+async def test_a_wakeup_is_on_the_grid_point_at_or_after_the_deadline() -> None:
+    grid = TickGrid(0.01)
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + 0.023
+    await grid.sleep_until(deadline)
+    woke = loop.time()
+    assert woke >= grid.slot_time(deadline) >= deadline
+    assert grid.slot_time(deadline) - deadline < 0.01
+
+
+async def test_machines_due_in_one_slot_share_one_timer_and_one_loop_turn() -> None:
+    grid = TickGrid(0.01)
+    loop = asyncio.get_running_loop()
+    base = grid.slot_time(loop.time() + 0.02)
+    order: list[str] = []
+
+    async def machine(name: str, due: float) -> None:
+        await grid.sleep_until(due)
+        order.append(name)
+
+    tasks = [asyncio.create_task(machine(n, base - d)) for n, d in (("a", 0.001), ("b", 0.005), ("c", 0.009))]
+    await asyncio.sleep(0)
+    assert grid.pending_slots == 1
+    first = await asyncio.wait_for(asyncio.gather(*tasks), 1.0)
+    assert first == [None, None, None] and sorted(order) == ["a", "b", "c"]
+    assert grid.pending_slots == 0
+
+
+async def test_cancelling_one_sleeper_leaves_the_others_on_time() -> None:
+    grid = TickGrid(0.01)
+    loop = asyncio.get_running_loop()
+    due = loop.time() + 0.015
+    victim = asyncio.create_task(grid.sleep_until(due))
+    survivor = asyncio.create_task(grid.sleep_until(due))
+    await asyncio.sleep(0)
+    victim.cancel()
+    await asyncio.wait_for(survivor, 1.0)
+    assert victim.cancelled() and loop.time() >= due
+
+
+async def test_a_deadline_in_the_past_returns_at_once() -> None:
+    grid = TickGrid(0.01)
+    loop = asyncio.get_running_loop()
+    await asyncio.wait_for(grid.sleep_until(loop.time() - 5), 0.5)
+    assert grid.pending_slots == 0
+
+
+def test_the_step_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="step"):
+        TickGrid(0)
