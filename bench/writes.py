@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import socket
 import tempfile
 import threading
 import time
@@ -57,6 +58,9 @@ class CommandClient:
         self.client.on_subscribe = lambda *a: subscribed.set()
         self.client.on_message = self._on_message
         self.client.connect(broker.host, broker.port, keepalive=30)
+        sock = self.client.socket()
+        if isinstance(sock, socket.socket):  # the measuring client must not add Nagle's ~40 ms itself
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.client.loop_start()
         if not subscribed.wait(10):
             raise RuntimeError("command client could not subscribe")

@@ -80,6 +80,7 @@ class Mosquitto:
             "log_type error\n"
             "log_type warning\n"
             "max_queued_messages 100000\n"
+            "set_tcp_nodelay true\n"  # as a latency-minded deployment configures it (docs/performance.md)
         )
         self.conf = conf
 

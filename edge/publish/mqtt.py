@@ -220,6 +220,10 @@ class MqttConnection:
         return True
 
     def _watch(self, loop: asyncio.AbstractEventLoop, client: paho.Client, sock: Any) -> None:
+        # paho leaves Nagle on: a reply or DATA sent while an earlier packet is unacknowledged would wait
+        # for the broker's delayed ACK (~40 ms). Each flush already hands the kernel whole packets.
+        with contextlib.suppress(OSError, AttributeError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._watched = sock
         self._writer_added = False
         client.on_socket_register_write = self._paho_want_write

@@ -369,7 +369,7 @@ class Publisher:
     # -- Sparkplug session ---------------------------------------------------------------------------
 
     def _spb_will(self, previous_unsent: bool) -> Will:
-        """paho thread, before every CONNECT: next bdSeq (persisted) in a fresh NDEATH Will."""
+        """Before every CONNECT (in the connect worker thread): next bdSeq (persisted) in a fresh NDEATH Will."""
         bdseq = self._bdseq.next_for_connect(previous_unsent)
         will = self._node.will(bdseq)
         return Will(will.topic, will.payload, qos=will.qos, retain=will.retain, tag=bdseq)
