@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from operator import attrgetter
 
+from edge.publish import ddata as dd
 from edge.publish import payload as pl
 from edge.publish.aliases import NODE, AliasMap
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
@@ -73,12 +74,20 @@ class CommandIgnored:
 CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
 
 
+# name -> (alias field bytes, value field writer, type): what a DATA message needs per metric
+_Encoder = tuple[bytes, dd.ValueField, MetricType]
+
+
+def _encoder(alias: int, mtype: MetricType) -> _Encoder:
+    return dd.alias_field(alias), dd.VALUE_FIELDS[mtype], mtype
+
+
 @dataclass
 class _Device:
     specs: dict[str, MetricSpec]
     aliases: dict[str, int]  # metric name -> alias
     last: dict[str, Sample] = field(default_factory=dict)
-    encoders: dict[str, tuple[int, pl.DataWriter]] = field(default_factory=dict)  # name -> (alias, writer)
+    encoders: dict[str, _Encoder] = field(default_factory=dict)
     online: bool = False
     not_good: set[str] = field(default_factory=set)  # published last with a non-GOOD quality
 
@@ -223,7 +232,7 @@ class SparkplugNode:
             check_metric_name(s.name)
             node.specs[s.name] = MetricSpec(s.name, s.type)
             node.aliases[s.name] = self._aliases.alias(NODE, s.name)
-            node.encoders[s.name] = (node.aliases[s.name], pl.DATA_WRITERS[s.type])
+            node.encoders[s.name] = _encoder(node.aliases[s.name], s.type)
         if new:
             self._aliases.save()
         changed = [s for s in samples if (old := node.last.get(s.name)) is None or old.value != s.value
@@ -252,7 +261,7 @@ class SparkplugNode:
         self._aliases.save()
         old = self._devices.get(device_id)
         dev = _Device(specs=spec_map, aliases=aliases, online=True)
-        dev.encoders = {n: (aliases[n], pl.DATA_WRITERS[spec.type]) for n, spec in spec_map.items()}
+        dev.encoders = {n: _encoder(aliases[n], spec.type) for n, spec in spec_map.items()}
         if old is not None:
             dev.last = {n: s for n, s in old.last.items() if n in spec_map}
         for s in samples:
@@ -356,39 +365,64 @@ class SparkplugNode:
               track_quality: bool = True) -> Outgoing:
         """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality).
 
+        Written straight to bytes (edge.publish.ddata). The loop's first branch is the common metric (a
+        GOOD value that was GOOD last time, not historical); the rest goes through `_metric`.
         `track_quality` False (historical replay): a non-GOOD quality is still stated on the metric, but
         the live "last published quality" bookkeeping is left alone.
         """
-        ts = self._clock()
-        p = Payload(timestamp=ts, seq=self._next_seq())
-        metrics = p.metrics
+        parts = [dd.payload_head(self._clock())]
+        tail = dd.payload_tail(self._next_seq())
+        headers = dd.SHORT_RECORD_HEADERS
         encoders = dev.encoders
         not_good = dev.not_good if track_quality else set(dev.not_good)
         good = Quality.GOOD
+        last_ts = -1
+        stamp = b""
         for s in sorted(samples, key=_by_timestamp):
-            name = s.name
+            alias, value_field, mtype = encoders[s.name]
+            if s.timestamp_ms != last_ts:  # sorted: equal timestamps are adjacent
+                last_ts = s.timestamp_ms
+                stamp = dd.timestamp_field(last_ts)
             value = s.value
-            alias, write = encoders[name]
-            try:
-                if value is None:
-                    m = metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
-                else:
-                    m = write(metrics, alias, s.timestamp_ms, value)
-            except (TypeError, ValueError) as exc:
-                self._encode_failed(name, exc)
-                m = metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
-                pl.add_quality(m, Quality.BAD)
-                not_good.add(name)
+            if (s.quality is good and value is not None and not s.historical
+                    and not (not_good and s.name in not_good)
+                    and (data := value_field(value)) is not None):
+                body = alias + stamp + data
+                if len(body) < 128:
+                    parts.append(headers[len(body)] + body)
+                    continue
+                parts.append(dd.metric_record(body))
                 continue
-            if s.historical:
-                m.is_historical = True
-            if s.quality is not good:
-                pl.add_quality(m, s.quality)
-                not_good.add(name)
-            elif name in not_good:
-                pl.add_quality(m, good)  # tell the host the value is good again
-                not_good.discard(name)
-        return Outgoing(topic, p.SerializeToString())
+            parts.append(self._metric(s, alias + stamp, mtype, not_good))
+        parts.append(tail)
+        return Outgoing(topic, b"".join(parts))
+
+    def _metric(self, s: Sample, head: bytes, mtype: MetricType, not_good: set[str]) -> bytes:
+        """One metric record the general way: null, historical, Quality, runtime-encoded values, errors."""
+        name = s.name
+        value = s.value
+        flags = dd.HISTORICAL if s.historical else b""
+        if value is None:
+            flags += dd.NULL
+            data = b""
+        else:
+            fast = dd.VALUE_FIELDS[mtype](value)
+            if fast is not None:
+                data = fast
+            else:
+                try:
+                    data = dd.runtime_value_field(mtype, value)
+                except (TypeError, ValueError) as exc:
+                    self._encode_failed(name, exc)
+                    not_good.add(name)
+                    return dd.metric_record(head + dd.NULL + dd.QUALITY_FIELD[Quality.BAD])
+        if s.quality is not Quality.GOOD:
+            flags += dd.QUALITY_FIELD[s.quality]
+            not_good.add(name)
+        elif name in not_good:
+            flags += dd.QUALITY_FIELD[Quality.GOOD]  # tell the host the value is good again
+            not_good.discard(name)
+        return dd.metric_record(head + flags + data)
 
     # -- commands ------------------------------------------------------------------------------------
 

@@ -47,7 +47,7 @@ QUALITY_PROPERTY = "Quality"
 UNIT_PROPERTY = "engUnit"
 
 
-def _as_text(value: object) -> str:
+def as_text(value: object) -> str:
     """Strings pass through; structured values (alarm lists, events) become compact JSON."""
     if isinstance(value, str):
         return value
@@ -69,7 +69,7 @@ DATA_WRITERS: dict[MetricType, DataWriter] = {
     MetricType.UINT64: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, long_value=v),
     MetricType.FLOAT: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, float_value=v),
     MetricType.DOUBLE: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, double_value=v),
-    MetricType.STRING: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, string_value=_as_text(v)),
+    MetricType.STRING: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, string_value=as_text(v)),
     MetricType.DATETIME: lambda ms, a, ts, v: ms.add(alias=a, timestamp=ts, long_value=v),
 }
 
@@ -86,7 +86,7 @@ VALUE_SETTERS: dict[MetricType, Callable[[Metric, Any], None]] = {
     MetricType.UINT64: lambda m, v: setattr(m, "long_value", int(v)),
     MetricType.FLOAT: lambda m, v: setattr(m, "float_value", float(v)),
     MetricType.DOUBLE: lambda m, v: setattr(m, "double_value", float(v)),
-    MetricType.STRING: lambda m, v: setattr(m, "string_value", _as_text(v)),
+    MetricType.STRING: lambda m, v: setattr(m, "string_value", as_text(v)),
     MetricType.DATETIME: lambda m, v: setattr(m, "long_value", int(v)),
 }
 
