@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import random
 import subprocess
@@ -11,8 +12,9 @@ from pathlib import Path
 import pytest
 
 from edge.publish import Publisher, PublishSettings
-from edge.publish.mqtt import backoff_delay
+from edge.publish.mqtt import MqttConnection, backoff_delay
 from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
+from tests.integration.mqtt_observer import Observer
 
 pytestmark = pytest.mark.integration
 
@@ -135,3 +137,50 @@ async def test_reconnects_after_broker_restart_with_clean_session(mosquitto: Mos
                              message="reconnected")
     finally:
         await pub.stop()
+
+
+@pytest.mark.parametrize("protocol", ["3.1.1", "5"])
+async def test_qos0_batches_keep_publish_order_with_paho_packets_and_retain(
+        mosquitto: Mosquitto, tmp_path: Path, protocol: str) -> None:
+    """QoS 0 packets are encoded by us and written once per loop turn; QoS 1 ones by paho. A subscriber
+    must see them in publish order, and a retained QoS 0 message must be retained."""
+    connected = asyncio.Event()
+    conn = MqttConnection(settings(mosquitto, tmp_path, protocol=protocol), "order-test",
+                          before_connect=lambda unsent: None, on_connected=lambda tag: connected.set(),
+                          on_disconnected=lambda: None, on_message=lambda msg: None)
+    observer = Observer(mosquitto, ("order/#",))
+    conn.start()
+    try:
+        await asyncio.wait_for(connected.wait(), 10)
+        sent = []
+        for i in range(60):  # one loop turn: QoS 0 batch, then paho's QoS 1 packet must come after it
+            payload = f"{i}".encode()
+            assert conn.publish("order/x", payload, qos=1 if i % 7 == 3 else 0)
+            sent.append(payload)
+        await async_wait_for(lambda: len(observer.on("order/x")) == len(sent), message="all 60 messages")
+        assert [m.payload for m in observer.on("order/x")] == sent
+        assert conn.publish("order/retained", b"kept", qos=0, retain=True)
+        await async_wait_for(lambda: observer.on("order/retained"), message="retained message")
+    finally:
+        await conn.stop()
+        observer.close()
+    late = Observer(mosquitto, ("order/retained",))
+    try:
+        await async_wait_for(lambda: late.on("order/retained"), message="retained for a late subscriber")
+        assert late.on("order/retained")[0].retain and late.on("order/retained")[0].payload == b"kept"
+    finally:
+        late.close()
+
+
+async def test_wildcard_topic_still_refused_by_paho(mosquitto: Mosquitto, tmp_path: Path) -> None:
+    connected = asyncio.Event()
+    conn = MqttConnection(settings(mosquitto, tmp_path), "wild", before_connect=lambda unsent: None,
+                          on_connected=lambda tag: connected.set(), on_disconnected=lambda: None,
+                          on_message=lambda msg: None)
+    conn.start()
+    try:
+        await asyncio.wait_for(connected.wait(), 10)
+        with pytest.raises(ValueError, match="wildcard"):
+            conn.publish("bad/+/topic", b"x")
+    finally:
+        await conn.stop()
