@@ -24,6 +24,7 @@ class AliasMap:
         self._by_key: dict[tuple[str, str], int] = {}
         self._by_alias: dict[int, tuple[str, str]] = {}
         self._dirty = False
+        self._highest = 0  # the largest alias ever assigned or loaded (max() per new alias was O(n^2))
         if store is not None:
             self._load(store)
 
@@ -42,6 +43,7 @@ class AliasMap:
                 if isinstance(alias, int) and alias >= 0 and alias not in self._by_alias:
                     self._by_key[(device, name)] = alias
                     self._by_alias[alias] = (device, name)
+                    self._highest = max(self._highest, alias)
 
     def alias(self, device_id: str, name: str) -> int:
         """The alias of a metric, allocating the next free one (never reused) the first time."""
@@ -49,7 +51,7 @@ class AliasMap:
         found = self._by_key.get(key)
         if found is not None:
             return found
-        alias = max(self._by_alias, default=0) + 1
+        self._highest = alias = self._highest + 1
         self._by_key[key] = alias
         self._by_alias[alias] = key
         self._dirty = True

@@ -5,11 +5,20 @@ client uses (edge.focas.frame and the function table in edge.focas.functions). F
 subpacket the server finds the function by (class, command), asks the machine state for the typed
 value (or applies the write) and lets the table encode the payload; a CncError from the state becomes
 that subpacket's EW code. One answer subpacket per request subpacket, in order, each with its own rc.
+`answer_subpacket` does exactly that, step by step: it is the reference.
+
+The server itself answers through AnswerPlans, because a collector asks the same questions every poll
+and the reference's per-subpacket work (function lookup, request and answer objects, Decimal-based
+scaled encoding) cost a 200-machine fleet a whole core. A plan is compiled once per request subpacket
+(its exact bytes) and then only reads the state and encodes: the same handlers and table encoders, with
+scaled values, 30i-form records and byte-exact PMC reads encoded directly. The state is read on every
+request, as before; tests/test_sim_fastpath.py holds the plans byte-identical to the reference.
 
 Open (0x0101) answers 0x0102, close (0x0201) answers 0x0202 and ends the session, data (0x2101)
 answers 0x2102. The header version of answers follows the profile (2, 3 or 4). Unknown commands, and
 the parameter/diagnosis form the profile does not have, answer EW_FUNC. Faults (edge.sim.faults) are
-applied per request; ServerStats counts PDUs so tests can assert "ten items went as one request".
+applied per request (a data request while an `ew` fault is set is answered by the reference path);
+ServerStats counts PDUs so tests can assert "ten items went as one request".
 """
 
 from __future__ import annotations
@@ -19,7 +28,7 @@ import contextlib
 import logging
 import struct
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,6 +45,9 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import (
+    REQUEST_SUBPACKET_FIXED,
+    RESPONSE_SUBPACKET_FIXED,
+    Frame,
     FrameDecoder,
     PduType,
     RequestSubpacket,
@@ -46,7 +58,8 @@ from edge.focas.frame import (
     encode_response,
 )
 from edge.focas.functions import Context, Function, error_response
-from edge.focas.model import PmcType
+from edge.focas.model import ParamRecord, PmcType
+from edge.focas.values import MAX_ENCODE_EXPONENT, encode_scaled
 from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.state import MachineState
 
@@ -224,6 +237,261 @@ def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPl
         return error_response(req, EW_NUMBER)
 
 
+# ---- the fast path: one compiled answer per request subpacket, byte-identical to answer_subpacket ------
+_RESPONSE_HEAD = struct.Struct(">HHHHhh2sH")  # edge.focas.frame's response subpacket layout
+_RECORD_HEAD = struct.Struct(">ihh")  # edge.focas.values' parameter/diagnosis record head
+_SCALED = struct.Struct(">iBBh")  # edge.focas.values' 8-byte scaled value
+_U16 = struct.Struct(">H")
+_TIMER_LE = struct.Struct("<ii")
+_I32_MIN, _I32_MAX = -(2**31), 2**31 - 1
+_MAX_PAYLOAD = 0xFFFF - RESPONSE_SUBPACKET_FIXED
+_ZERO_SLOT = encode_scaled(0)  # the padding slot of a 30i-form record
+# PMC data types whose elements unpack and pack back to the very same bytes (not float: NaN payloads).
+_BYTE_EXACT_PMC_TYPES = frozenset({PmcType.BYTE, PmcType.WORD, PmcType.LONG})
+SCALED_CACHE_LIMIT = 8192  # remembered scaled encodings (shared by every machine of the process)
+PLAN_CACHE_LIMIT = 4096  # compiled request shapes per server; a collector polls a few dozen
+
+AnswerSource = Callable[[], bytes]
+_scaled_known: dict[tuple[type, object], bytes] = {}
+
+
+def scaled_bytes(value: float | None) -> bytes:
+    """encode_scaled(value), remembered by type and value: macros, feeds and zero slots repeat every poll."""
+    key = (value.__class__, value)
+    known = _scaled_known.get(key)
+    if known is None:
+        known = _encode_scaled_quickly(value)
+        if len(_scaled_known) >= SCALED_CACHE_LIMIT:
+            _scaled_known.clear()
+        _scaled_known[key] = known
+    return known
+
+
+def _encode_scaled_quickly(value: float | None) -> bytes:
+    """encode_scaled's bytes without Decimal when the shortest repr is a plain decimal that fits.
+
+    encode_scaled picks the smallest exponent at which Decimal(repr(value)) is an integer; for a repr
+    without an exponent that is the count of fraction digits (trailing zeros dropped). When that is at
+    most MAX_ENCODE_EXPONENT and the digits fit an i32, every smaller exponent fits too, so the answer
+    is the digits themselves. Anything else (ints beyond i32, 1e-05, inf, nan, None) goes to encode_scaled.
+    """
+    if value.__class__ is float:
+        text = repr(value)
+        if "e" not in text and "n" not in text:
+            whole, _, fraction = text.partition(".")
+            fraction = fraction.rstrip("0")
+            mantissa = int(whole + fraction)
+            if len(fraction) <= MAX_ENCODE_EXPONENT and _I32_MIN <= mantissa <= _I32_MAX:
+                return _SCALED.pack(mantissa, 0, 10, len(fraction))
+    elif value.__class__ is int and _I32_MIN <= value <= _I32_MAX:
+        return _SCALED.pack(value, 0, 10, 0)
+    return encode_scaled(value)
+
+
+def _scaled_list_bytes(values: Sequence[float | None]) -> bytes:
+    """encode_scaled_list(values)."""
+    return b"".join(map(scaled_bytes, values))
+
+
+def _scaled_records_bytes(records: Sequence[ParamRecord], max_axis: int) -> bytes:
+    """encode_records(records, max_axis, SlotForm.SCALED): 30i-form records, missing slots zero."""
+    parts = []
+    for record in records:
+        values = record.values
+        if len(values) > max_axis:
+            raise ValueError(f"record {record.number} has {len(values)} values, max_axis {max_axis}")
+        parts.append(_RECORD_HEAD.pack(record.number, record.axis, record.type))
+        parts.extend(map(scaled_bytes, values))
+        parts.append(_ZERO_SLOT * (max_axis - len(values)))
+    return b"".join(parts)
+
+
+def _direct_encoder(function: Function, ctx: Context) -> Callable[[Any], bytes] | None:
+    """A quicker encoder giving the same bytes as the table's, where the table's is the costly kind.
+
+    Matched by the encoder itself, not the function, so a table entry that changes its encoder simply
+    falls back to it.
+    """
+    encoder = function.encode_payload
+    if encoder is fn.POSITIONS.encode_payload:  # n x 8-B scaled: macros, positions, loads, meters
+        return _scaled_list_bytes
+    if encoder is fn.ACTUAL_FEED.encode_payload:  # one 8-B scaled value: feed, spindle speed
+        return scaled_bytes
+    if encoder is fn.READ_PARAMS_8.encode_payload:  # 30i-form parameter and diagnosis records
+        max_axis = ctx.max_axis
+        return lambda records: _scaled_records_bytes(records, max_axis)
+    return None
+
+
+def _pmc_memory_source(state: MachineState, req: RequestSubpacket) -> AnswerSource | None:
+    """A well-formed byte/word/long PMC read: its memory bytes as they are (what unpack-then-pack gives).
+
+    None for any other shape (unknown area or type, partial elements, float types): the generic path
+    answers those, with the reference's errors.
+    """
+    start, end, adr_type, data_type, _ = req.args
+    area = PMC_AREA_BY_CODE.get(adr_type)
+    if area is None or data_type not in _BYTE_EXACT_PMC_TYPES:
+        return None
+    width = PmcType(data_type).width
+    count = (end - start + 1) // width
+    if (end - start + 1) % width or count < 1:
+        return None
+    last = start + count * width - 1
+    return lambda: state.read_pmc_bytes(area, start, last)
+
+
+def _payload_source(state: MachineState, req: RequestSubpacket, function: Function, ctx: Context) -> AnswerSource:
+    """How this request's payload is made on every poll: the reference's handler and encoder, or a
+    byte-identical shortcut for the hot ones."""
+    handler = HANDLERS[function]
+    if function is fn.READ_TIMER and state.profile.timer_little_endian:
+        def little_endian_timer() -> bytes:
+            value = handler(state, req, ctx)
+            return _TIMER_LE.pack(value.minutes, value.msec)
+
+        return little_endian_timer
+    if handler is _read_pmc:
+        memory = _pmc_memory_source(state, req)
+        if memory is not None:
+            return memory
+    direct = _direct_encoder(function, ctx)
+    if direct is not None:
+        return lambda: direct(handler(state, req, ctx))
+    encode = function.encode_payload
+    return lambda: encode(handler(state, req, ctx), req, ctx)
+
+
+class SubpacketTooLong(ValueError):
+    """A payload beyond the u16 length; raised after the whole PDU was worked, as encode_response does."""
+
+
+def _guarded(req: RequestSubpacket, payload_of: AnswerSource) -> AnswerSource:
+    """The encoded answer subpacket: the payload with its header, or the EW code the reference gives for
+    the exception (CncError its code, ProtocolError EW_LENGTH, ValueError EW_NUMBER)."""
+    cls, path, command = req.cls, req.path, req.command
+
+    def answer() -> bytes:
+        try:
+            payload = payload_of()
+        except CncError as exc:
+            return error_response(req, exc.code).encode()
+        except ProtocolError:  # a write whose extra bytes do not match its args
+            return error_response(req, EW_LENGTH).encode()
+        except ValueError:  # a value the wire cannot carry
+            return error_response(req, EW_NUMBER).encode()
+        size = len(payload)
+        if size > _MAX_PAYLOAD:
+            raise SubpacketTooLong(f"subpacket payload of {size} bytes does not fit a u16 length")
+        return _RESPONSE_HEAD.pack(RESPONSE_SUBPACKET_FIXED + size, cls, path, command, 0, 0, b"\x00\x00",
+                                   size) + payload
+
+    return answer
+
+
+def _constant(answer: bytes) -> AnswerSource:
+    return lambda: answer
+
+
+def _answer_source(state: MachineState, req: RequestSubpacket, function: Function | None,
+                   ctx: Context) -> AnswerSource:
+    """answer_subpacket's decision tree, taken once: path, then function, then the data."""
+    if req.path != 1:
+        return _constant(error_response(req, EW_PATH).encode())
+    if function is None or req.command in state.profile.refused_commands or function not in HANDLERS:
+        return _constant(error_response(req, EW_FUNC).encode())
+    return _guarded(req, _payload_source(state, req, function, ctx))
+
+
+@dataclass(frozen=True, slots=True)
+class AnswerPlan:
+    """One request subpacket, compiled: what the stats and faults need and how to answer it now."""
+
+    command: int
+    name: str  # the table name (or 0x.... for an unknown command), as faults address it
+    request: RequestSubpacket
+    answer: AnswerSource
+
+
+def compile_plan(state: MachineState, request: RequestSubpacket, ctx: Context) -> AnswerPlan:
+    function = fn.BY_COMMAND.get((request.cls, request.command))
+    return AnswerPlan(request.command, _function_name(request), request,
+                      _answer_source(state, request, function, ctx))
+
+
+def _request_chunks(body: bytes) -> list[bytes]:
+    """The subpacket bytes of a well-formed 0x2101 body; a malformed one raises decode_request_body's
+    ProtocolError (the same checks, so the same bodies fail)."""
+    size = len(body)
+    if size >= 2:
+        (count,) = _U16.unpack_from(body, 0)
+        chunks = []
+        offset = 2
+        for _ in range(count):
+            if offset + 2 > size:
+                break
+            (length,) = _U16.unpack_from(body, offset)
+            if length < REQUEST_SUBPACKET_FIXED or offset + length > size:
+                break
+            chunks.append(body[offset : offset + length])
+            offset += length
+        else:
+            if offset == size:
+                return chunks
+    decode_request_body(body)  # raises the ProtocolError naming the fault
+    raise ProtocolError(f"data request: malformed {size}-byte body")  # pragma: no cover
+
+
+class AnswerPlans:
+    """A machine's compiled answers, by request subpacket bytes (the same few every poll).
+
+    Compiling reads nothing that changes while serving except the profile and the Context, and the
+    plans are dropped when either is replaced; the state itself is read when a plan answers.
+    """
+
+    def __init__(self, state: MachineState) -> None:
+        self.state = state
+        self._plans: dict[bytes, AnswerPlan] = {}
+        self._compiled_for: tuple[object, Context] | None = None
+
+    def for_body(self, body: bytes, ctx: Context) -> list[AnswerPlan]:
+        """The plans of a 0x2101 body, in order; ProtocolError for a malformed body."""
+        if self._compiled_for is None or self._compiled_for[0] is not self.state.profile \
+                or self._compiled_for[1] is not ctx:
+            self._plans.clear()
+            self._compiled_for = (self.state.profile, ctx)
+        plans = self._plans
+        result = []
+        for chunk in _request_chunks(body):
+            plan = plans.get(chunk)
+            if plan is None:
+                plan = self._compile(chunk, ctx)
+            result.append(plan)
+        return result
+
+    def _compile(self, chunk: bytes, ctx: Context) -> AnswerPlan:
+        (request,) = decode_request_body(_U16.pack(1) + chunk)
+        plan = compile_plan(self.state, request, ctx)
+        if len(self._plans) >= PLAN_CACHE_LIMIT:
+            self._plans.clear()
+        self._plans[chunk] = plan
+        return plan
+
+
+def encode_planned_response(plans: Sequence[AnswerPlan], version: int) -> bytes:
+    """The 0x2102 PDU answering `plans` now: what encode_response gives for answer_subpacket's answers."""
+    parts = [_U16.pack(len(plans))]
+    too_long: SubpacketTooLong | None = None
+    for plan in plans:
+        try:
+            parts.append(plan.answer())
+        except SubpacketTooLong as exc:  # the reference fails only when encoding, after every handler ran
+            too_long = too_long or exc
+    if too_long is not None:
+        raise too_long
+    return Frame(version, PduType.DATA_RESPONSE, b"".join(parts)).encode()
+
+
 @dataclass
 class ServerStats:
     """What the server has seen; `data_pdus` is the request counter tests assert on."""
@@ -254,6 +522,7 @@ class NativeServer:
         self.port = port
         self.stats = ServerStats()
         self.context = Context.from_sysinfo(state.sysinfo())
+        self.plans = AnswerPlans(state)
         self._server: asyncio.Server | None = None
         self._sessions: set[asyncio.StreamWriter] = set()
 
@@ -345,26 +614,41 @@ class NativeServer:
 
     async def _answer_data(self, body: bytes, writer: asyncio.StreamWriter, version: int) -> str:
         """Answer one data PDU: "ok", or "dropped" / "hang" when the conversation must end."""
-        requests = decode_request_body(body)
+        plans = self.plans.for_body(body, self.context)
         self.stats.data_pdus += 1
-        self.stats.subpackets += len(requests)
-        self.stats.last_batch = len(requests)
-        self.stats.commands.update(req.command for req in requests)
+        self.stats.subpackets += len(plans)
+        self.stats.last_batch = len(plans)
+        self.stats.commands.update([plan.command for plan in plans])
         if self.faults.take_drop():
             writer.transport.abort()
             return "dropped"
         if self.faults.take_garbage():
             writer.write(GARBAGE)
             return "ok"
-        answers = [answer_subpacket(self.state, req, self.faults, self.context) for req in requests]
-        reply = encode_response(answers, version)
-        calls = [(req.command, _function_name(req)) for req in requests]
-        if self.faults.take_hang() or self.faults.take_hang_on(calls):
+        reply = self.reply(plans, version)
+        if self.faults.take_hang() or self._take_hang_on(plans):
             writer.write(reply[: max(1, len(reply) // 2)])
             await writer.drain()
             return "hang"
         writer.write(reply)
         return "ok"
+
+    def answer_body(self, body: bytes, version: int) -> bytes:
+        """The 0x2102 PDU for a 0x2101 body, without stats or connection faults (tests, benchmarks)."""
+        return self.reply(self.plans.for_body(body, self.context), version)
+
+    def reply(self, plans: Sequence[AnswerPlan], version: int) -> bytes:
+        """The answer PDU now; forced EW codes are per subpacket, by command or name: the reference's job."""
+        if self.faults.ew:
+            answers = [answer_subpacket(self.state, plan.request, self.faults, self.context) for plan in plans]
+            return encode_response(answers, version)
+        return encode_planned_response(plans, version)
+
+    def _take_hang_on(self, plans: Sequence[AnswerPlan]) -> bool:
+        """faults.take_hang_on for this request (skipped when no hang_on is set: it would change nothing)."""
+        if not self.faults.hang_on:
+            return False
+        return self.faults.take_hang_on([(plan.command, plan.name) for plan in plans])
 
 
 async def _stay_silent(reader: asyncio.StreamReader) -> None:

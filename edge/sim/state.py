@@ -277,11 +277,12 @@ class MachineState:
         """Replay the cycle up to `now` (default: the injected clock): parts, alarms raised and cleared."""
         with self._lock:
             target = (self._time() if now is None else now) - self._t0 + self._phase
-            if target <= self._processed:
+            processed = self._processed
+            if target <= processed:
                 return
-            self._count_parts(self._processed, target)
+            self._count_parts(processed, target)
             if self.cycle.alarm_every > 0:
-                self._replay_alarms(self._processed, target)
+                self._replay_alarms(processed, target)
             self._processed = target
             self._refresh_signals(target)
 
@@ -324,13 +325,17 @@ class MachineState:
                 self._cycle_alarm = None
 
     def _refresh_signals(self, t: float) -> None:
-        """F/Y signals that mirror the machine state (a ladder would set them)."""
-        cutting, _ = self._phase_at(t)
-        running = cutting and not self.emergency
-        f0 = (0b1000_0000 if self.mode == AUT_MEM else 0) | (0b0010_0000 if running else 0)
-        self._pmc["F"][0] = f0
-        self._pmc["F"][1] = 0b0000_0001 if self._alarms_active() else 0  # AL
-        self._pmc["Y"][0] = (self._pmc["Y"][0] & 0xFE) | (1 if running else 0)  # coolant on
+        """F/Y signals that mirror the machine state (a ladder would set them).
+
+        Runs on every read that finds time moved, so it spells out _phase_at's "cutting" and
+        _alarms_active instead of calling them.
+        """
+        cycle = self.cycle
+        running = t % cycle.length < cycle.cut_seconds and not self.emergency
+        f, y = self._pmc["F"], self._pmc["Y"]
+        f[0] = (0b1000_0000 if self.mode == AUT_MEM else 0) | (0b0010_0000 if running else 0)
+        f[1] = 0b0000_0001 if self._manual_alarms or self._cycle_alarm is not None else 0  # AL
+        y[0] = (y[0] & 0xFE) | (1 if running else 0)  # coolant on
 
     # ---- CNC clock ---------------------------------------------------------------------------------
     @property
@@ -449,13 +454,16 @@ class MachineState:
         return [p for p in PROGRAMS if p.number >= start][:count]
 
     # ---- motion ------------------------------------------------------------------------------------
-    def _axis_position(self, index: int, t: float) -> float:
-        """Absolute position of axis `index` at cycle time t: a contour while cutting, home between parts."""
+    def _axis_positions(self, t: float) -> list[float]:
+        """Absolute position of every axis at cycle time t: a contour while cutting, home between parts."""
         cutting, into = self._phase_at(t)
         if not cutting:
-            return 0.0
+            return [0.0] * self.profile.axis_count
         p = into / self.cycle.cut_seconds
-        name = self.profile.axis_names[index]
+        return [self._contour(index, name, p) for index, name in enumerate(self.profile.axis_names)]
+
+    def _contour(self, index: int, name: str, p: float) -> float:
+        """Where axis `index` (called `name`) is at fraction p of the cut."""
         if name in "ABC":  # rotary: indexes / turns with the part
             return round((p * 360.0 * (3 if name == "C" else 1)) % 360.0, 3)
         amplitude = (120.0, 80.0, 25.0)[index % 3]
@@ -466,14 +474,14 @@ class MachineState:
         """Per controlled axis: absolute, machine (absolute + work offset), relative, distance (to go)."""
         with self._lock:
             t = self._cycle_time()
-            now = [self._axis_position(i, t) for i in range(self.profile.axis_count)]
+            now = self._axis_positions(t)
             if kind in ("absolute", "relative"):
                 return now
             if kind == "machine":
                 offsets = (-350.0, -200.0, -410.0, 0.0, 0.0)
                 return [round(v + offsets[i % len(offsets)], 3) for i, v in enumerate(now)]
             if kind == "distance":
-                ahead = [self._axis_position(i, t + 0.25) for i in range(self.profile.axis_count)]
+                ahead = self._axis_positions(t + 0.25)
                 return [round(a - b, 3) for a, b in zip(ahead, now, strict=True)]
             raise cnc_error(EW_NUMBER, "cnc_position", message=f"unknown position kind {kind!r}")
 
@@ -587,21 +595,25 @@ class MachineState:
     # ---- macros ------------------------------------------------------------------------------------
     @staticmethod
     def _check_macro(number: int, function: str) -> None:
-        if not any(lo <= number <= hi for lo, hi in MACRO_RANGES):
-            ranges = ", ".join(f"#{lo}-#{hi}" for lo, hi in MACRO_RANGES)
-            raise cnc_error(EW_NUMBER, function, message=f"macro #{number} is outside {ranges}")
+        for lo, hi in MACRO_RANGES:  # a loop, not any(): every macro read of every poll passes here
+            if lo <= number <= hi:
+                return
+        ranges = ", ".join(f"#{lo}-#{hi}" for lo, hi in MACRO_RANGES)
+        raise cnc_error(EW_NUMBER, function, message=f"macro #{number} is outside {ranges}")
 
     def read_macros(self, first: int, last: int) -> list[float | None]:
         """#first..#last inclusive (None = vacant); EW_NUMBER if any number is not a common variable."""
         if last < first:
             raise cnc_error(EW_NUMBER, "cnc_rdmacror", message=f"range #{first}-#{last} is empty")
-        for number in (first, last):
-            self._check_macro(number, "cnc_rdmacror")
+        self._check_macro(first, "cnc_rdmacror")
+        self._check_macro(last, "cnc_rdmacror")
         with self._lock:
-            values = [self._macros.get(n, 0) for n in range(first, last + 1)]
-            if any(n not in self._macros for n in range(first, last + 1)):
-                raise cnc_error(EW_NUMBER, "cnc_rdmacror", message=f"range #{first}-#{last} spans a gap")
-            return values
+            macros = self._macros
+            try:
+                return [macros[n] for n in range(first, last + 1)]
+            except KeyError:
+                gap = f"range #{first}-#{last} spans a gap"
+        raise cnc_error(EW_NUMBER, "cnc_rdmacror", message=gap)
 
     def read_macro(self, number: int) -> float | None:
         return self.read_macros(number, number)[0]
@@ -722,7 +734,7 @@ class MachineState:
     def _diag_values(self, number: int, t: float) -> list[int | float]:
         cutting, into = self._phase_at(t)
         n = self.profile.axis_count
-        absolute = [self._axis_position(i, t) for i in range(n)]
+        absolute = self._axis_positions(t)
         if number == 0:
             return [0b0000_0001 if cutting and into < 1.0 else 0]  # waiting for FIN (tool change)
         if number == 300:
