@@ -585,6 +585,8 @@ class MachineConfig(_Model):
     series: str | None = None
     timezone: str = "UTC"
     timeouts: Timeouts = Field(default_factory=Timeouts)
+    # Subpackets per request PDU (focas only). No public source states a control's limit; 32 is safe.
+    max_subpackets: int | None = Field(default=None, ge=2, le=128)
     max_skew_s: Duration = 60.0
     poll: PollPlan = Field(default_factory=PollPlan)
     alarms: AlarmsConfig | None = None
@@ -615,6 +617,8 @@ class MachineConfig(_Model):
             raise _at("host", "required" + (" (or address)" if self.transport == "packed" else ""))
         if self.host is not None and self.address is not None:
             raise _at("address", "give host/port or address, not both")
+        if self.transport != "focas" and self.max_subpackets is not None:
+            raise _at("max_subpackets", "only for transport focas (the packed surface has no subpackets)")
         return self
 
     @property

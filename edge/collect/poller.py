@@ -123,9 +123,10 @@ SessionFactory = Callable[[MachineConfig], CncSession]
 
 def default_session(machine: MachineConfig) -> CncSession:
     timeouts = machine.timeouts
+    extra = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
     return open_session(machine.transport, machine.endpoint, timeout=timeouts.request_s,
                         connect_timeout=timeouts.connect_s, backoff_initial=timeouts.backoff_initial_s,
-                        backoff_max=timeouts.backoff_max_s)
+                        backoff_max=timeouts.backoff_max_s, **extra)
 
 
 class MachinePoller:

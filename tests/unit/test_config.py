@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from edge import ConfigError
 from edge.cli import main
+from edge.collect.poller import default_session
 from edge.config import (
     DEFAULT_STATE_DIR,
     Config,
@@ -18,6 +19,7 @@ from edge.config import (
     load_config,
     parse_config,
 )
+from edge.focas.client import MAX_SUBPACKETS
 from edge.focas.model import PmcType
 
 REPO = Path(__file__).resolve().parents[2]
@@ -252,6 +254,28 @@ def test_packed_transport_addresses() -> None:
     assert "machines[1].address: only for transport packed; the focas transport uses host and port" in problems
     assert "machines[2].host: required" in problems
     assert any(p.startswith("machines[3].transport: ") for p in problems)
+
+
+def test_max_subpackets_reaches_the_client_and_is_checked() -> None:
+    config = parse("""
+        mqtt: {host: b, formats: [json]}
+        machines:
+          - {id: a, host: h}
+          - {id: b, host: h, max_subpackets: 64}
+    """)
+    clients = [default_session(m) for m in config.machines]
+    assert [c.max_subpackets for c in clients] == [MAX_SUBPACKETS, 64]  # type: ignore[attr-defined]
+    problems = problems_of("""
+        mqtt: {host: b, formats: [json]}
+        machines:
+          - {id: a, host: h, max_subpackets: 1}
+          - {id: b, host: h, max_subpackets: 500}
+          - {id: c, transport: packed, address: "tcp:h:1", max_subpackets: 8}
+    """)
+    assert any(p.startswith("machines[0].max_subpackets: ") and "2" in p for p in problems), problems
+    assert any(p.startswith("machines[1].max_subpackets: ") and "128" in p for p in problems), problems
+    assert ("machines[2].max_subpackets: only for transport focas (the packed surface has no subpackets)"
+            in problems), problems
 
 
 def test_writes_policy_global_plus_machine() -> None:
