@@ -61,6 +61,7 @@ from edge.focas.functions import Context, Function, error_response
 from edge.focas.model import ParamRecord, PmcType
 from edge.focas.values import MAX_ENCODE_EXPONENT, encode_scaled
 from edge.sim.faults import GARBAGE, FaultPlan
+from edge.sim.profiles import Profile
 from edge.sim.state import MachineState
 
 log = logging.getLogger(__name__)
@@ -249,7 +250,7 @@ _ZERO_SLOT = encode_scaled(0)  # the padding slot of a 30i-form record
 # PMC data types whose elements unpack and pack back to the very same bytes (not float: NaN payloads).
 _BYTE_EXACT_PMC_TYPES = frozenset({PmcType.BYTE, PmcType.WORD, PmcType.LONG})
 SCALED_CACHE_LIMIT = 8192  # remembered scaled encodings (shared by every machine of the process)
-PLAN_CACHE_LIMIT = 4096  # compiled request shapes per server; a collector polls a few dozen
+PLAN_CACHE_LIMIT = 512  # compiled read shapes per server; a collector polls a few dozen
 
 AnswerSource = Callable[[], bytes]
 _scaled_known: dict[tuple[type, object], bytes] = {}
@@ -414,6 +415,7 @@ class AnswerPlan:
 
 
 def compile_plan(state: MachineState, request: RequestSubpacket, ctx: Context) -> AnswerPlan:
+    """The plan answering `request` on `state` from now on (reads nothing but the profile yet)."""
     function = fn.BY_COMMAND.get((request.cls, request.command))
     return AnswerPlan(request.command, _function_name(request), request,
                       _answer_source(state, request, function, ctx))
@@ -443,16 +445,17 @@ def _request_chunks(body: bytes) -> list[bytes]:
 
 
 class AnswerPlans:
-    """A machine's compiled answers, by request subpacket bytes (the same few every poll).
+    """A machine's compiled answers, by request subpacket bytes (the same few reads every poll).
 
     Compiling reads nothing that changes while serving except the profile and the Context, and the
-    plans are dropped when either is replaced; the state itself is read when a plan answers.
+    plans are dropped when either is replaced; the state itself is read when a plan answers. Requests
+    carrying extra bytes (writes) are compiled each time and not kept: their values rarely repeat.
     """
 
     def __init__(self, state: MachineState) -> None:
         self.state = state
         self._plans: dict[bytes, AnswerPlan] = {}
-        self._compiled_for: tuple[object, Context] | None = None
+        self._compiled_for: tuple[Profile, Context] | None = None
 
     def for_body(self, body: bytes, ctx: Context) -> list[AnswerPlan]:
         """The plans of a 0x2101 body, in order; ProtocolError for a malformed body."""
@@ -472,9 +475,10 @@ class AnswerPlans:
     def _compile(self, chunk: bytes, ctx: Context) -> AnswerPlan:
         (request,) = decode_request_body(_U16.pack(1) + chunk)
         plan = compile_plan(self.state, request, ctx)
-        if len(self._plans) >= PLAN_CACHE_LIMIT:
-            self._plans.clear()
-        self._plans[chunk] = plan
+        if not request.extra:
+            if len(self._plans) >= PLAN_CACHE_LIMIT:
+                self._plans.clear()
+            self._plans[chunk] = plan
         return plan
 
 
