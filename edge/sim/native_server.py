@@ -12,7 +12,7 @@ and the reference's per-subpacket work (function lookup, request and answer obje
 scaled encoding) cost a 200-machine fleet a whole core. A plan is compiled once per request subpacket
 (its exact bytes) and then only reads the state and encodes: the same handlers and table encoders, with
 scaled values, 30i-form records and byte-exact PMC reads encoded directly. The state is read on every
-request, as before; tests/test_sim_fastpath.py holds the plans byte-identical to the reference.
+request, as before; tests/unit/test_sim_fastpath.py holds the plans byte-identical to the reference.
 
 Open (0x0101) answers 0x0102, close (0x0201) answers 0x0202 and ends the session, data (0x2101)
 answers 0x2102. The header version of answers follows the profile (2, 3 or 4). Unknown commands, and
