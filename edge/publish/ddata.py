@@ -55,6 +55,11 @@ def varint(n: int) -> bytes:
         return _SMALL_VARINTS[n]
     if n < 0 or n > MASK64:
         raise ValueError(f"{n} does not fit an unsigned 64-bit field")
+    if n < 0x4000:
+        return bytes(((n & 0x7F) | 0x80, n >> 7))
+    if 1 << 35 <= n < 1 << 42:  # epoch milliseconds from 1971 to 2109: six bytes, no loop
+        return bytes(((n & 0x7F) | 0x80, (n >> 7 & 0x7F) | 0x80, (n >> 14 & 0x7F) | 0x80,
+                      (n >> 21 & 0x7F) | 0x80, (n >> 28 & 0x7F) | 0x80, n >> 35))
     out = bytearray()
     while n > 0x7F:
         out.append((n & 0x7F) | 0x80)
@@ -80,8 +85,15 @@ def metric_record(body: bytes) -> bytes:
     return _METRIC + varint(len(body)) + body
 
 
+_last_head: tuple[int, bytes] = (-1, b"")
+
+
 def payload_head(timestamp_ms: int) -> bytes:
-    return _PAYLOAD_TIMESTAMP + varint(timestamp_ms)
+    """The payload's timestamp field; the messages of one loop turn mostly share the millisecond."""
+    global _last_head
+    if _last_head[0] != timestamp_ms:
+        _last_head = (timestamp_ms, _PAYLOAD_TIMESTAMP + varint(timestamp_ms))
+    return _last_head[1]
 
 
 def payload_tail(seq: int) -> bytes:
@@ -137,6 +149,9 @@ def _float32(v: Any) -> bytes | None:
 
 def _float64(v: Any) -> bytes | None:
     return _DOUBLE_VALUE + _PACK_DOUBLE(v) if type(v) is float else None
+
+
+DOUBLE_FIELD = struct.Struct("<Bd").pack  # (0x69, value): the double_value field of a float, one C call
 
 
 def _string(v: Any) -> bytes | None:

@@ -90,6 +90,7 @@ class _Device:
     encoders: dict[str, _Encoder] = field(default_factory=dict)
     online: bool = False
     not_good: set[str] = field(default_factory=set)  # published last with a non-GOOD quality
+    data_topic: str = ""  # its DDATA topic (NDATA for the node)
 
 
 class SparkplugNode:
@@ -106,7 +107,7 @@ class SparkplugNode:
         self.born = False  # an NBIRTH went out in the current MQTT session
         self.holding = False  # a rebirth is pending: DATA stops until the births are re-sent
         self._held_events: list[tuple[str, list[Sample]]] = []
-        self._node = _Device(specs={}, aliases={}, online=True)
+        self._node = _Device(specs={}, aliases={}, online=True)  # NDATA goes to _ndata_topic
         self._devices: dict[str, _Device] = {}
         self.unknown_metrics = 0
         self.encode_errors = 0
@@ -260,7 +261,8 @@ class SparkplugNode:
         aliases = {name: self._aliases.alias(device_id, name) for name in spec_map}
         self._aliases.save()
         old = self._devices.get(device_id)
-        dev = _Device(specs=spec_map, aliases=aliases, online=True)
+        dev = _Device(specs=spec_map, aliases=aliases, online=True,
+                      data_topic=self._device_topic.format(kind="DDATA", device=device_id))
         dev.encoders = {n: _encoder(aliases[n], spec.type) for n, spec in spec_map.items()}
         if old is not None:
             dev.last = {n: s for n, s in old.last.items() if n in spec_map}
@@ -278,11 +280,16 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        known = self._known(device_id, dev, samples)
-        dev.last.update(zip(map(_name_of, known), known, strict=True))
+        names = list(map(_name_of, samples))
+        if all(map(dev.specs.__contains__, names)):
+            known = samples
+        else:
+            known = self._known(device_id, dev, samples)
+            names = list(map(_name_of, known))
+        dev.last.update(zip(names, known, strict=True))
         if not (self.live and dev.online) or not known:
             return []
-        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
+        return [self._data(dev.data_topic, dev, known)]
 
     def device_events(self, device_id: str, events: Sequence[Sample]) -> list[Outgoing]:
         """Events (alarm raise/clear, history) as DDATA with their own occurrence time; held in a rebirth."""
@@ -298,7 +305,7 @@ class SparkplugNode:
             return []
         if not (self.live and dev.online):
             return []
-        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, known)]
+        return [self._data(dev.data_topic, dev, known)]
 
     def historical_data(self, device_id: str, samples: Sequence[Sample]) -> list[Outgoing]:
         """Replayed store-and-forward samples: DDATA with is_historical=true and their own timestamps.
@@ -313,7 +320,7 @@ class SparkplugNode:
         if not known:
             return []
         marked = [s if s.historical else replace(s, historical=True) for s in known]
-        return [self._data(self._device_topic.format(kind="DDATA", device=device_id), dev, marked,
+        return [self._data(dev.data_topic, dev, marked,
                            track_quality=False)]
 
     def device_offline(self, device_id: str) -> list[Outgoing]:
@@ -372,7 +379,9 @@ class SparkplugNode:
         """
         parts = [dd.payload_head(self._clock())]
         tail = dd.payload_tail(self._next_seq())
+        append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
+        double, double_field = dd.DOUBLE_FIELD, dd.VALUE_FIELDS[MetricType.DOUBLE]
         encoders = dev.encoders
         not_good = dev.not_good if track_quality else set(dev.not_good)
         good = Quality.GOOD
@@ -384,17 +393,21 @@ class SparkplugNode:
                 last_ts = s.timestamp_ms
                 stamp = dd.timestamp_field(last_ts)
             value = s.value
-            if (s.quality is good and value is not None and not s.historical
-                    and not (not_good and s.name in not_good)
-                    and (data := value_field(value)) is not None):
-                body = alias + stamp + data
-                if len(body) < 128:
-                    parts.append(headers[len(body)] + body)
+            if s.quality is good and not s.historical and (not not_good or s.name not in not_good):
+                if value_field is double_field and type(value) is float:  # most values: inline
+                    body = alias + stamp + double(0x69, value)
+                elif value is not None and (data := value_field(value)) is not None:
+                    body = alias + stamp + data
+                else:
+                    append(self._metric(s, alias + stamp, mtype, not_good))
                     continue
-                parts.append(dd.metric_record(body))
+                try:
+                    append(headers[len(body)] + body)
+                except IndexError:  # a body of 128 bytes or more: a longer length varint
+                    append(dd.metric_record(body))
                 continue
-            parts.append(self._metric(s, alias + stamp, mtype, not_good))
-        parts.append(tail)
+            append(self._metric(s, alias + stamp, mtype, not_good))
+        append(tail)
         return Outgoing(topic, b"".join(parts))
 
     def _metric(self, s: Sample, head: bytes, mtype: MetricType, not_good: set[str]) -> bytes:
