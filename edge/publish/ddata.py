@@ -157,7 +157,7 @@ DOUBLE_FIELD = struct.Struct("<Bd").pack  # (0x69, value): the double_value fiel
 def _string(v: Any) -> bytes | None:
     try:
         data = (v if type(v) is str else pl.as_text(v)).encode()
-    except (TypeError, ValueError):  # unencodable text or JSON: let the runtime raise its own error
+    except (TypeError, ValueError, OverflowError):  # unencodable text or JSON: let the runtime raise its own error
         return None
     return _STRING_VALUE + varint(len(data)) + data
 

@@ -182,7 +182,7 @@ class SparkplugNode:
                 m = pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, value,
                                         ts if sample is None else sample.timestamp_ms, unit=spec.unit,
                                         quality=quality, description=spec.description)
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError) as exc:  # Overflow: a huge int for a bool
                 self._encode_failed(name, exc)
                 del p.metrics[-1]
                 pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, None, ts,
@@ -425,7 +425,7 @@ class SparkplugNode:
             else:
                 try:
                     data = dd.runtime_value_field(mtype, value)
-                except (TypeError, ValueError) as exc:
+                except (TypeError, ValueError, OverflowError) as exc:
                     self._encode_failed(name, exc)
                     not_good.add(name)
                     return dd.metric_record(head + dd.NULL + dd.QUALITY_FIELD[Quality.BAD])

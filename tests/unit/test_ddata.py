@@ -57,7 +57,7 @@ def reference(seq: int, aliases: dict[str, int], batch: list[Sample], not_good: 
                 m = p.metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
             else:
                 m = pl.DATA_WRITERS[s.type](p.metrics, alias, s.timestamp_ms, s.value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             errors += 1
             m = p.metrics.add(alias=alias, timestamp=s.timestamp_ms, is_null=True)
             pl.add_quality(m, Quality.BAD)
@@ -125,3 +125,16 @@ def test_historical_null_with_quality_in_field_order() -> None:
     assert (m.is_historical, m.is_null, pl.quality_of(m)) == (True, True, Quality.STALE)
     assert m.WhichOneof("value") is None
 
+
+
+def test_a_value_the_runtime_overflows_on_is_sent_null_and_bad_in_data_and_birth() -> None:
+    n = make_node()
+    n.births()
+    n.device_online("m1", [MetricSpec("flag", MetricType.BOOLEAN), MetricSpec("x", MetricType.DOUBLE)], [])
+    out = n.device_data("m1", [Sample("flag", 2**63, MetricType.BOOLEAN, 5), Sample("x", 1.5, MetricType.DOUBLE, 5)])
+    flag, x = Payload.FromString(out[0].payload).metrics
+    assert (flag.is_null, pl.quality_of(flag), x.double_value) == (True, Quality.BAD, 1.5)
+    assert n.encode_errors == 1
+    (rebirth,) = [m for m in n.births() if "/DBIRTH/" in m.topic]
+    born = {m.name: m for m in Payload.FromString(rebirth.payload).metrics}
+    assert born["flag"].is_null and pl.quality_of(born["flag"]) is Quality.BAD
