@@ -182,7 +182,7 @@ class SparkplugNode:
                 m = pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, value,
                                         ts if sample is None else sample.timestamp_ms, unit=spec.unit,
                                         quality=quality, description=spec.description)
-            except (TypeError, ValueError, OverflowError) as exc:  # Overflow: a huge int for a bool
+            except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
                 self._encode_failed(name, exc)
                 del p.metrics[-1]
                 pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, None, ts,
