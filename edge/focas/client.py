@@ -31,6 +31,7 @@ from edge.focas.errors import (
 )
 from edge.focas.frame import (
     Answer,
+    AnswerMemo,
     Echo,
     Frame,
     FrameDecoder,
@@ -133,6 +134,7 @@ class PreparedPdu:
     requests: tuple[RequestSubpacket, ...]
     echoes: tuple[Echo, ...]
     items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
+    memo: AnswerMemo  # the last answer's subpackets (split_response reuses the unchanged ones)
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,7 +229,7 @@ class FocasClient(CncSession):
                     continue
                 key = answers[offset] if count == 1 else tuple(answers[offset : offset + count])
                 previous = last[index]
-                if previous is not None and previous[0] == key:
+                if previous is not None and (previous[0] is key or previous[0] == key):
                     results[index] = previous[1]
                 else:
                     value = item_value(plan, answers, offset, context)
@@ -307,7 +309,8 @@ class FocasClient(CncSession):
         for group in self._groups(plans):
             requests = [req for _, plan in group for req in plan.requests]
             pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests),
-                                    tuple((req.cls, req.path, req.command) for req in requests), tuple(group)))
+                                    tuple((req.cls, req.path, req.command) for req in requests), tuple(group),
+                                    [None] * len(requests)))
         return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))
 
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
@@ -346,7 +349,7 @@ class FocasClient(CncSession):
         """One prepared 0x2101 out, its (rc, detail, payload) answers back; count and echoes checked."""
         frame = await self._roundtrip(pdu.data, PduType.DATA_RESPONSE, "data request")
         try:
-            return split_response(frame.body, pdu.echoes)
+            return split_response(frame.body, pdu.echoes, pdu.memo)
         except ProtocolError as exc:
             raise ProtocolError(f"{self.describe()}: {exc}") from None
 

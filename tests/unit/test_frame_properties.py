@@ -162,3 +162,32 @@ def test_property_split_response_rejects_a_truncated_body(subs: list[ResponseSub
         split_response(body[: max(0, len(body) - cut)], echoes)
     with pytest.raises(ProtocolError, match="left after"):
         split_response(body + b"\x00", echoes)
+
+
+@given(st.lists(st.tuples(u16, u16, u16), min_size=1, max_size=5), st.data())
+def test_property_split_response_with_memo_answers_as_without(echoes: list[tuple[int, int, int]],
+                                                              data: st.DataObject) -> None:
+    """A run of answers (some repeating subpackets, some changed, some malformed) to one request: with
+    the memo the result, or the error, is the one a fresh split gives, and an unchanged subpacket comes
+    back as the very same Answer object."""
+    memo: list[Any] = [None] * len(echoes)
+    previous: list[tuple[int, int, bytes]] | None = None
+    payloads = st.sampled_from([b"", b"\x00\x01", b"\x00\x02", b"\x00\x01\x00\x00"])
+    for _ in range(data.draw(st.integers(1, 6))):
+        subs = [ResponseSubpacket(cls, command, data.draw(st.sampled_from([0, 0, 5])), 0, data.draw(payloads),
+                                  path) for cls, path, command in echoes]
+        body = encode_response(subs)[10:]
+        body = data.draw(st.sampled_from([body, body, body[:-1], body + b"\x00"]))
+        try:
+            expected = split_response(body, echoes)
+        except ProtocolError as exc:
+            with pytest.raises(ProtocolError, match=str(exc)[:20].replace("(", ".").replace(")", ".")):
+                split_response(body, echoes, memo)
+            previous = None  # the memo may hold part of the failed answer
+            continue
+        got = split_response(body, echoes, memo)
+        assert got == expected
+        if previous is not None:
+            for old, new in zip(previous, got, strict=True):
+                assert old is new or old != new  # an unchanged subpacket: the same Answer object
+        previous = got
