@@ -96,6 +96,7 @@ class ReadKind(enum.Enum):
     ALARM_HISTORY = "alarm_history"  # published as events, not values
 
 
+_NOT_IN_TICK = frozenset({pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})  # read on change / once per session
 _NOTHING = object()  # no previous result (compares unequal to any result)
 
 
@@ -110,12 +111,13 @@ class TickBatch:
     extractors: tuple[pl.ValueExtractor, ...]
 
     @classmethod
-    def build(cls, reads: Sequence[pl.PlannedRead]) -> TickBatch:
+    def build(cls, reads: Sequence[pl.PlannedRead],
+              extractor: Callable[[pl.PlannedRead], pl.ValueExtractor] = pl.value_extractor) -> TickBatch:
         kinds = tuple(ReadKind.ALARM_STATUS if isinstance(r.item, it.ReadAlarmStatus)
                       else ReadKind.ALARM_HISTORY if isinstance(r.item, it.ReadAlarmHistory)
                       else ReadKind.VALUES for r in reads)
         return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
-                   tuple(pl.value_extractor(r) for r in reads))
+                   tuple(extractor(r) for r in reads))
 
 
 SessionFactory = Callable[[MachineConfig], CncSession]
@@ -152,6 +154,7 @@ class MachinePoller:
         self._plan: pl.MachinePlan | None = None
         self._grid = grid or TickGrid()
         self._batches: dict[frozenset[pl.Group], TickBatch] = {}
+        self._extractors: dict[int, pl.ValueExtractor] = {}  # id(read) of the current plan's reads
         self._batches_plan: pl.MachinePlan | None = None
         self._last_raw: dict[int, object] = {}  # id(read) -> its last good result (reads that did not move)
         self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
@@ -300,13 +303,21 @@ class MachinePoller:
         """The reads of the due groups plus the clock, built once per plan and combination of groups."""
         if self._batches_plan is not plan:
             self._batches.clear()
+            self._extractors.clear()
             self._batches_plan = plan
-        key = frozenset(groups)
+        key = frozenset(groups - _NOT_IN_TICK)  # combinations that differ only there share one batch
         batch = self._batches.get(key)
         if batch is None:
-            batch = TickBatch.build(plan.reads_for(groups - {pl.Group.ACTIVE_ALARMS, pl.Group.STATIC}))
+            batch = TickBatch.build(plan.reads_for(key), self._extractor)
             self._batches[key] = batch
         return batch
+
+    def _extractor(self, read: pl.PlannedRead) -> pl.ValueExtractor:
+        """One extractor per read of the plan, shared by every combination of groups it appears in."""
+        found = self._extractors.get(id(read))
+        if found is None:
+            found = self._extractors[id(read)] = pl.value_extractor(read)
+        return found
 
     async def _tick(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickResult:
         """One batched round trip for the due groups; the samples returned are the changes only."""
