@@ -17,12 +17,16 @@ DOCUMENT = "sparkplug_aliases"
 
 
 class AliasMap:
-    """(device id, metric name) <-> alias, persisted in the state store when it grows."""
+    """(device id, metric name) <-> alias, persisted in the state store when it grows.
+
+    Stored per device (device -> name -> alias), as the file is: no tuple per metric. The reverse map
+    (alias -> metric), needed only for commands sent by alias, is built on first use after a change.
+    """
 
     def __init__(self, store: StateStore | None = None) -> None:
         self._store = store
-        self._by_key: dict[tuple[str, str], int] = {}
-        self._by_alias: dict[int, tuple[str, str]] = {}
+        self._devices: dict[str, dict[str, int]] = {}
+        self._reverse: dict[int, tuple[str, str]] | None = None
         self._dirty = False
         self._highest = 0  # the largest alias ever assigned or loaded (max() per new alias was O(n^2))
         if store is not None:
@@ -36,37 +40,40 @@ class AliasMap:
         if not isinstance(devices, dict):
             log.error("alias map ignored: 'devices' is not an object path=%s", store.path(DOCUMENT))
             return
+        seen: set[int] = set()
         for device, names in devices.items():
             if not isinstance(names, dict):
                 continue
             for name, alias in names.items():
-                if isinstance(alias, int) and alias >= 0 and alias not in self._by_alias:
-                    self._by_key[(device, name)] = alias
-                    self._by_alias[alias] = (device, name)
+                if isinstance(alias, int) and alias >= 0 and alias not in seen:
+                    seen.add(alias)
+                    self._devices.setdefault(device, {})[name] = alias
                     self._highest = max(self._highest, alias)
 
     def alias(self, device_id: str, name: str) -> int:
         """The alias of a metric, allocating the next free one (never reused) the first time."""
-        key = (device_id, name)
-        found = self._by_key.get(key)
+        names = self._devices.get(device_id)
+        if names is None:
+            names = self._devices[device_id] = {}
+        found = names.get(name)
         if found is not None:
             return found
         self._highest = alias = self._highest + 1
-        self._by_key[key] = alias
-        self._by_alias[alias] = key
+        names[name] = alias
+        self._reverse = None
         self._dirty = True
         return alias
 
     def resolve(self, alias: int) -> tuple[str, str] | None:
         """(device id, metric name) for an alias, or None if this node never assigned it."""
-        return self._by_alias.get(alias)
+        if self._reverse is None:
+            self._reverse = {a: (device, name) for device, names in self._devices.items()
+                             for name, a in names.items()}
+        return self._reverse.get(alias)
 
     def save(self) -> None:
         """Persist the map if it grew since the last save."""
         if not self._dirty or self._store is None:
             return
-        devices: dict[str, dict[str, int]] = {}
-        for (device, name), alias in self._by_key.items():
-            devices.setdefault(device, {})[name] = alias
-        self._store.save(DOCUMENT, {"version": 1, "devices": devices})
+        self._store.save(DOCUMENT, {"version": 1, "devices": self._devices})
         self._dirty = False

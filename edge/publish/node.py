@@ -74,18 +74,17 @@ class CommandIgnored:
 CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
 
 
-# name -> (alias field bytes, value field writer, type): what a DATA message needs per metric
-_Encoder = tuple[bytes, dd.ValueField, MetricType]
+# name -> (alias field bytes, value field writer, type, alias): what DATA and births need per metric
+_Encoder = tuple[bytes, dd.ValueField, MetricType, int]
 
 
 def _encoder(alias: int, mtype: MetricType) -> _Encoder:
-    return dd.alias_field(alias), dd.VALUE_FIELDS[mtype], mtype
+    return dd.alias_field(alias), dd.VALUE_FIELDS[mtype], mtype, alias
 
 
 @dataclass
 class _Device:
     specs: dict[str, MetricSpec]
-    aliases: dict[str, int]  # metric name -> alias
     last: dict[str, Sample] = field(default_factory=dict)
     encoders: dict[str, _Encoder] = field(default_factory=dict)
     online: bool = False
@@ -107,7 +106,7 @@ class SparkplugNode:
         self.born = False  # an NBIRTH went out in the current MQTT session
         self.holding = False  # a rebirth is pending: DATA stops until the births are re-sent
         self._held_events: list[tuple[str, list[Sample]]] = []
-        self._node = _Device(specs={}, aliases={}, online=True)  # NDATA goes to _ndata_topic
+        self._node = _Device(specs={}, online=True)  # NDATA goes to _ndata_topic
         self._devices: dict[str, _Device] = {}
         self.unknown_metrics = 0
         self.encode_errors = 0
@@ -179,13 +178,13 @@ class SparkplugNode:
             value = None if sample is None else sample.value
             quality = Quality.GOOD if sample is None else sample.quality
             try:
-                m = pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, value,
+                m = pl.add_birth_metric(p.metrics, name, dev.encoders[name][3], spec.type, value,
                                         ts if sample is None else sample.timestamp_ms, unit=spec.unit,
                                         quality=quality, description=spec.description)
             except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
                 self._encode_failed(name, exc)
                 del p.metrics[-1]
-                pl.add_birth_metric(p.metrics, name, dev.aliases[name], spec.type, None, ts,
+                pl.add_birth_metric(p.metrics, name, dev.encoders[name][3], spec.type, None, ts,
                                     unit=spec.unit, quality=Quality.BAD, description=spec.description)
                 continue
             if sample is not None and sample.historical:
@@ -232,8 +231,7 @@ class SparkplugNode:
         for s in new:
             check_metric_name(s.name)
             node.specs[s.name] = MetricSpec(s.name, s.type)
-            node.aliases[s.name] = self._aliases.alias(NODE, s.name)
-            node.encoders[s.name] = _encoder(node.aliases[s.name], s.type)
+            node.encoders[s.name] = _encoder(self._aliases.alias(NODE, s.name), s.type)
         if new:
             self._aliases.save()
         changed = [s for s in samples if (old := node.last.get(s.name)) is None or old.value != s.value
@@ -258,12 +256,12 @@ class SparkplugNode:
         for spec in specs:
             check_metric_name(spec.name)
             spec_map[spec.name] = spec
-        aliases = {name: self._aliases.alias(device_id, name) for name in spec_map}
+        encoders = {n: _encoder(self._aliases.alias(device_id, n), spec.type) for n, spec in spec_map.items()}
         self._aliases.save()
         old = self._devices.get(device_id)
-        dev = _Device(specs=spec_map, aliases=aliases, online=True,
+        dev = _Device(specs=spec_map, online=True,
                       data_topic=self._device_topic.format(kind="DDATA", device=device_id))
-        dev.encoders = {n: _encoder(aliases[n], spec.type) for n, spec in spec_map.items()}
+        dev.encoders = encoders
         if old is not None:
             dev.last = {n: s for n, s in old.last.items() if n in spec_map}
         for s in samples:
@@ -388,7 +386,7 @@ class SparkplugNode:
         last_ts = -1
         stamp = b""
         for s in sorted(samples, key=_by_timestamp):
-            alias, value_field, mtype = encoders[s.name]
+            alias, value_field, mtype, _ = encoders[s.name]
             if s.timestamp_ms != last_ts:  # sorted: equal timestamps are adjacent
                 last_ts = s.timestamp_ms
                 stamp = dd.timestamp_field(last_ts)

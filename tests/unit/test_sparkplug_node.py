@@ -103,6 +103,18 @@ def test_aliases_unique_across_devices_and_stable_across_restarts(tmp_path: Path
     assert aliases_by_topic(again) == first
 
 
+def test_alias_resolution_follows_new_aliases_and_a_reload(tmp_path: Path) -> None:
+    aliases = AliasMap(StateStore(tmp_path))
+    a = aliases.alias("m1", "x")
+    assert aliases.resolve(a) == ("m1", "x") and aliases.resolve(a + 1) is None
+    b = aliases.alias("m2", "x")  # added after the reverse map was built
+    assert b == a + 1 and aliases.resolve(b) == ("m2", "x")
+    aliases.save()
+    reloaded = AliasMap(StateStore(tmp_path))
+    assert (reloaded.resolve(a), reloaded.resolve(b)) == (("m1", "x"), ("m2", "x"))
+    assert reloaded.alias("m3", "y") == b + 1, "never reused after a restart"
+
+
 def aliases_by_topic(n: SparkplugNode) -> dict[tuple[str, str], int]:
     return {(m.topic, metric.name): metric.alias for m in n.births()
             for metric in pl.decode(m.payload).metrics if metric.HasField("alias")}
