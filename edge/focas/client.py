@@ -17,7 +17,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import cast
+from typing import Any, cast
 
 from edge.focas import functions as fn
 from edge.focas import items as it
@@ -59,6 +59,7 @@ MAX_SUBPACKETS = 32
 CLOSE_TIMEOUT = 1.0
 WRITE_OPERATIONS = frozenset({"write_macro", "write_pmc", "set_clock"})
 PLAN_CACHE_SIZE = 1024  # a poll plan repeats the same few dozen items every tick
+CELL_CACHE_SIZE = 4 * PLAN_CACHE_SIZE  # memo cells: one per request subpacket and per item plan
 PREPARED_CACHE_SIZE = 16  # a poller repeats one or a few item tuples (one per combination of due groups)
 
 
@@ -134,7 +135,7 @@ class PreparedPdu:
     requests: tuple[RequestSubpacket, ...]
     echoes: tuple[Echo, ...]
     items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
-    memo: AnswerMemo  # the last answer's subpackets (split_response reuses the unchanged ones)
+    memo: AnswerMemo  # per request, what was last answered to it (split_response reuses unchanged ones)
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,7 +148,7 @@ class PreparedBatch:
     items: Sequence[it.ReadItem]
     context: Context
     pdus: tuple[PreparedPdu, ...]
-    last: list[tuple[object, ItemResult] | None]  # per item: (its answers, its value); errors not kept
+    last: list[list[tuple[object, ItemResult] | None]]  # per item, a cell: (its answers, its value)
 
 
 class FocasClient(CncSession):
@@ -172,6 +173,9 @@ class FocasClient(CncSession):
         self._in_flight = False
         self._plans: dict[tuple[it.ReadItem, Context], ItemPlan] = {}
         self._prepared: dict[int, PreparedBatch] = {}
+        # One cell per request subpacket and per item plan, shared by every prepared batch that uses it (a
+        # poller's tick shapes overlap): keyed by id, the object pinned beside its cell.
+        self._cells: dict[int, tuple[object, list[Any]]] = {}
 
     def describe(self) -> str:
         return f"focas://{self.host}:{self.port}"
@@ -228,13 +232,14 @@ class FocasClient(CncSession):
                     results[index] = item_value(plan, answers, offset, context)
                     continue
                 key = answers[offset] if count == 1 else tuple(answers[offset : offset + count])
-                previous = last[index]
+                cell = last[index]
+                previous = cell[0]
                 if previous is not None and (previous[0] is key or previous[0] == key):
                     results[index] = previous[1]
                 else:
                     value = item_value(plan, answers, offset, context)
                     results[index] = value
-                    last[index] = None if isinstance(value, FocasError) else (key, value)
+                    cell[0] = None if isinstance(value, FocasError) else (key, value)
                 offset += count
         return results
 
@@ -284,6 +289,7 @@ class FocasClient(CncSession):
             plan = plan_item(item, self.context, self.path)
             if len(self._plans) >= PLAN_CACHE_SIZE:
                 self._plans.clear()
+                self._cells.clear()  # their requests and plans are not asked again
             self._plans[key] = plan
         return plan
 
@@ -300,6 +306,7 @@ class FocasClient(CncSession):
             prepared = self._build_batch(items)
             if len(self._prepared) >= PREPARED_CACHE_SIZE:
                 self._prepared.clear()
+                self._cells.clear()
             self._prepared[id(items)] = prepared
         return prepared
 
@@ -310,8 +317,16 @@ class FocasClient(CncSession):
             requests = [req for _, plan in group for req in plan.requests]
             pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests),
                                     tuple((req.cls, req.path, req.command) for req in requests), tuple(group),
-                                    [None] * len(requests)))
-        return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))
+                                    [self._cell(req) for req in requests]))
+        return PreparedBatch(items, self.context, tuple(pdus), [self._cell(plan) for plan in plans])
+
+    def _cell(self, owner: object) -> list[Any]:
+        found = self._cells.get(id(owner))
+        if found is None or found[0] is not owner:
+            if len(self._cells) >= CELL_CACHE_SIZE:  # one-off lists of items (CLI, writes) never repeat
+                self._cells.clear()
+            found = self._cells[id(owner)] = (owner, [None])
+        return found[1]
 
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
         """Items in order, packed into PDUs of at most max_subpackets subpackets."""

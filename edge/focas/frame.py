@@ -190,7 +190,10 @@ Answer = tuple[int, int, bytes]  # one response subpacket reduced to (rc, detail
 Echo = tuple[int, int, int]  # what a response subpacket must echo: (class, path, command)
 
 
-AnswerMemo = list[tuple[bytes, Answer] | None]  # per subpacket: its bytes in the last answer, and its Answer
+# Per subpacket, a one-slot cell: its bytes in the last answer and its Answer (None before the first).
+# Cells, not values, so that PDUs carrying the same request can share what was last seen for it.
+MemoCell = list[tuple[bytes, Answer] | None]
+AnswerMemo = Sequence[MemoCell]
 
 
 def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None = None) -> list[Answer]:
@@ -199,9 +202,10 @@ def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None 
     The client's hot path (one call per poll tick): the same checks as decode_response_body plus the
     count and every echo against `echoes`, in one pass and without building subpacket objects.
 
-    `memo` (one slot per echo, kept by the caller between answers to the same request): a subpacket whose
-    bytes are those of the last answer at the same place is not parsed again; its previous Answer, the
-    same tuple object, is returned (it passed every check then, against the same echo). Most subpackets
+    `memo` (one cell per echo, kept by the caller between answers; a cell belongs to one request
+    subpacket): a subpacket whose bytes are those last seen for its request is not parsed again; its
+    previous Answer, the same tuple object, is returned (it passed every check then, against the same
+    echo). Most subpackets
     of a poll repeat, so this is most of the work saved; the caller can tell "unchanged" by identity.
     """
     size = len(body)
@@ -216,7 +220,7 @@ def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None 
     startswith = body.startswith
     for index, echo in enumerate(echoes):
         if memo is not None:
-            known = memo[index]
+            known = memo[index][0]
             if known is not None and startswith(known[0], offset):
                 answers.append(known[1])
                 offset += len(known[0])
@@ -238,7 +242,7 @@ def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None 
         answer = (rc, detail, body[offset + RESPONSE_SUBPACKET_FIXED : offset + length])
         answers.append(answer)
         if memo is not None:
-            memo[index] = (body[offset : offset + length], answer)
+            memo[index][0] = (body[offset : offset + length], answer)
         offset += length
     if offset != size:
         raise ProtocolError(f"data response: {size - offset} bytes left after the {count} subpackets the "

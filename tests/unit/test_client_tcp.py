@@ -379,6 +379,21 @@ async def test_a_repeated_batch_reuses_its_request_and_unchanged_values(cnc: Scr
     assert first[0] == [1.25, None]
 
 
+async def test_batches_sharing_an_item_share_what_was_last_answered(cnc: ScriptedCnc) -> None:
+    """A poller's tick shapes (status only; status + macros) overlap: the memo is per request and item,
+    not per batch, so an unchanged item keeps its value object from one shape to the other."""
+    feed = it.ReadFeed()
+    small, large = (feed, it.ReadClock()), (it.ReadMacros(500, 501), feed, it.ReadClock())
+    async with client_for(cnc) as client:
+        first = await client.batch(small)
+        second = await client.batch(large)
+        cnc.macros[500] = 3.0
+        third = await client.batch(large)
+        fourth = await client.batch(small)
+    assert second[1] is first[0] and third[1] is first[0] and fourth[0] is first[0]
+    assert second[0] == [1.25, None] and third[0] == [3.0, None]
+
+
 async def test_a_list_batch_is_decoded_every_time(cnc: ScriptedCnc) -> None:
     batch = [it.ReadMacros(500, 501)]  # a list may change between calls: never cached
     async with client_for(cnc) as client:

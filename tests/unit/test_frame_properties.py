@@ -170,7 +170,7 @@ def test_property_split_response_with_memo_answers_as_without(echoes: list[tuple
     """A run of answers (some repeating subpackets, some changed, some malformed) to one request: with
     the memo the result, or the error, is the one a fresh split gives, and an unchanged subpacket comes
     back as the very same Answer object."""
-    memo: list[Any] = [None] * len(echoes)
+    memo: list[Any] = [[None] for _ in echoes]
     previous: list[tuple[int, int, bytes]] | None = None
     payloads = st.sampled_from([b"", b"\x00\x01", b"\x00\x02", b"\x00\x01\x00\x00"])
     for _ in range(data.draw(st.integers(1, 6))):
