@@ -15,8 +15,8 @@ import asyncio
 import contextlib
 import json
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
@@ -24,13 +24,12 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Histo
 from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
 from edge import __version__
+from edge.collect.poller import CYCLE_BUCKETS
 
 log = logging.getLogger(__name__)
 
 REQUEST_TIMEOUT_S = 5.0
 MAX_HEADER_BYTES = 8192
-# Poll cycle wall time buckets (seconds): a LAN round trip is ~1-20 ms, a slow control 100 ms+.
-CYCLE_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
 _REASONS = {200: "OK", 404: "Not Found", 405: "Method Not Allowed", 400: "Bad Request", 503: "Service Unavailable"}
 
 
@@ -91,35 +90,14 @@ def spool_depth(daemon: DaemonView) -> int:
     return int(depth() if callable(depth) else depth)
 
 
-@dataclass
-class _CycleHistogram:
-    """A cumulative histogram fed from the poller's bounded window of recent cycle times.
-
-    `PollerStats.ticks` counts every recorded cycle, so the entries new since the last scrape are the
-    last (ticks - seen) of the window; if more than the window holds arrived in between, the oldest
-    are lost to the buckets (a scrape every few minutes at 4 ticks/s still sees them all).
-    """
-
-    owner: int = 0  # id() of the poller this history belongs to (a reload replaces the poller)
-    seen: int = 0
-    buckets: list[int] = field(default_factory=lambda: [0] * (len(CYCLE_BUCKETS) + 1))
-    total: float = 0.0
-
-    def update(self, ticks: int, window: list[float]) -> None:
-        new = min(max(ticks - self.seen, 0), len(window))
-        self.seen = ticks
-        for seconds in window[len(window) - new:] if new else ():
-            index = next((i for i, bound in enumerate(CYCLE_BUCKETS) if seconds <= bound), len(CYCLE_BUCKETS))
-            self.buckets[index] += 1
-            self.total += seconds
-
-    def cumulative(self) -> list[tuple[str, float]]:
-        running = 0
-        out = []
-        for bound, count in zip((*CYCLE_BUCKETS, float("inf")), self.buckets, strict=True):
-            running += count
-            out.append(("+Inf" if bound == float("inf") else repr(bound), float(running)))
-        return out
+def cycle_histogram(buckets: Sequence[int]) -> list[tuple[str, float]]:
+    """A poller's cycle-time counts as Prometheus cumulative buckets ("le" bound, count)."""
+    running = 0
+    out = []
+    for bound, count in zip((*CYCLE_BUCKETS, float("inf")), buckets, strict=True):
+        running += count
+        out.append(("+Inf" if bound == float("inf") else repr(bound), float(running)))
+    return out
 
 
 class DaemonCollector:
@@ -127,7 +105,6 @@ class DaemonCollector:
 
     def __init__(self, daemon: DaemonView) -> None:
         self.daemon = daemon
-        self._cycles: dict[str, _CycleHistogram] = {}
 
     def collect(self) -> Iterable[Metric]:
         pollers = dict(self.daemon.pollers)
@@ -173,13 +150,7 @@ class DaemonCollector:
             skew_s = poller.clock.skew_s
             if skew_s is not None:
                 skew.add_metric([machine_id], skew_s)
-            history = self._cycles.get(machine_id)
-            if history is None or history.owner != id(poller):
-                history = self._cycles[machine_id] = _CycleHistogram(owner=id(poller))
-            history.update(stats.ticks, stats.cycle_times)
-            cycle.add_metric([machine_id], history.cumulative(), history.total)
-        for gone in set(self._cycles) - set(pollers):
-            del self._cycles[gone]
+            cycle.add_metric([machine_id], cycle_histogram(stats.cycle_buckets), stats.cycle_total_s)
         yield from (connected, ticks, overruns, skipped, errors, skew, cycle)
 
     def _publish_metrics(self, publisher: Any) -> Iterable[Metric]:

@@ -16,6 +16,7 @@ import json
 import logging
 import random
 import time
+from bisect import bisect_left
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -57,6 +58,10 @@ class DeviceSink(Protocol):
     async def device_offline(self, device_id: str) -> None: ...
 
 
+# Poll cycle wall time buckets (seconds): a LAN round trip is ~1-20 ms, a slow control 100 ms+.
+CYCLE_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
+
+
 @dataclass
 class PollerStats:
     """Counters the daemon publishes as node metrics and on /metrics."""
@@ -68,7 +73,10 @@ class PollerStats:
     disconnects: int = 0
     item_errors: dict[str, int] = field(default_factory=dict)  # by EW name or error class
     last_cycle_s: float = 0.0
-    cycle_times: list[float] = field(default_factory=list)  # recent cycle wall times (bounded)
+    # Cycle wall times as a histogram (counts per CYCLE_BUCKETS bound, then over the last): constant memory
+    # per machine, and nothing lost between two scrapes of /metrics.
+    cycle_buckets: list[int] = field(default_factory=lambda: [0] * (len(CYCLE_BUCKETS) + 1))
+    cycle_total_s: float = 0.0
 
     def count_error(self, error: FocasError) -> None:
         key = getattr(error, "name", None) or type(error).__name__
@@ -76,9 +84,8 @@ class PollerStats:
 
     def record_cycle(self, seconds: float) -> None:
         self.last_cycle_s = seconds
-        self.cycle_times.append(seconds)
-        if len(self.cycle_times) > 1000:
-            del self.cycle_times[:500]
+        self.cycle_buckets[bisect_left(CYCLE_BUCKETS, seconds)] += 1  # first bound >= seconds: "le"
+        self.cycle_total_s += seconds
 
 
 @dataclass
