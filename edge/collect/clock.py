@@ -58,6 +58,7 @@ class _Reading:
     lower: float  # c - m - u: the offset is at least this
     upper: float  # c - m + 1 + u: and less than this
     monotonic: float
+    seq: int  # its position in the stream of readings
 
 
 class ClockTracker:
@@ -67,9 +68,11 @@ class ClockTracker:
         self.zone = zone if isinstance(zone, ZoneInfo) else ZoneInfo(zone)
         self.max_skew_s = max_skew_s
         self.window_s = window_s
-        self._readings: deque[_Reading] = deque()
-        # Sliding-window extremes in amortised O(1) per tick (a poll loop calls observe at 10 Hz):
-        # readings whose `lower` decreases (front = max) and whose `upper` increases (front = min).
+        # Only the readings that can still be an extreme of the window are kept (a reading whose bound a
+        # later one beats never matters again): sliding-window extremes in amortised O(1) per tick, and a
+        # few readings per machine instead of the whole window (512 readings were ~60 KB per machine).
+        # Readings whose `lower` decreases (front = max) and whose `upper` increases (front = min).
+        self._count = 0  # readings observed since the last reset
         self._max_lower: deque[_Reading] = deque()
         self._min_upper: deque[_Reading] = deque()
         self._low = float("-inf")
@@ -89,31 +92,22 @@ class ClockTracker:
         """
         base = cnc_to_utc_seconds(cnc_wall, self.zone) - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
-        self._add(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic))
-        while self._readings and (len(self._readings) > MAX_READINGS
-                                  or gateway_monotonic - self._readings[0].monotonic > self.window_s):
-            self._evict_oldest()
+        self._count += 1
+        self._add(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic, self._count))
+        self._evict(self._count - MAX_READINGS, gateway_monotonic, self.window_s)
         self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
         if self._low >= self._high:
             # Inconsistent with the window: the CNC clock jumped (or drifted). Keep the newest
             # readings that still agree with each other and drop the older ones.
             self.restarts += 1
-            newest = list(self._readings)
-            self._readings.clear()
-            low, high = float("-inf"), float("inf")
-            for reading in reversed(newest):
-                low, high = max(low, reading.lower), min(high, reading.upper)
-                if low >= high:
-                    break
-                self._readings.appendleft(reading)
-            self._recompute()
+            self._evict(self._agreeing_since(), gateway_monotonic, float("inf"))
+            self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
         offset = self.offset_s
         assert offset is not None
         self._skew = gateway_monotonic + offset - gateway_wall
         return self._judge()
 
     def _add(self, reading: _Reading) -> None:
-        self._readings.append(reading)
         while self._max_lower and self._max_lower[-1].lower <= reading.lower:
             self._max_lower.pop()
         self._max_lower.append(reading)
@@ -121,23 +115,26 @@ class ClockTracker:
             self._min_upper.pop()
         self._min_upper.append(reading)
 
-    def _evict_oldest(self) -> None:
-        oldest = self._readings.popleft()
-        if self._max_lower and self._max_lower[0] is oldest:
-            self._max_lower.popleft()
-        if self._min_upper and self._min_upper[0] is oldest:
-            self._min_upper.popleft()
+    def _evict(self, first_seq: int, now: float, window_s: float) -> None:
+        """Leave the window: readings before `first_seq` or older than `window_s` at `now` (both rise
+        from front to back of each deque, so only fronts go). The newest reading always stays."""
+        for extremes in (self._max_lower, self._min_upper):
+            while len(extremes) > 1 and (extremes[0].seq < first_seq or now - extremes[0].monotonic > window_s):
+                extremes.popleft()
 
-    def _recompute(self) -> None:
-        """Rebuild the window extremes from scratch (after the window was rebuilt on a clock jump)."""
-        readings = list(self._readings)
-        self._readings.clear()
-        self._max_lower.clear()
-        self._min_upper.clear()
-        for reading in readings:
-            self._add(reading)
-        self._low = self._max_lower[0].lower
-        self._high = self._min_upper[0].upper
+    def _agreeing_since(self) -> int:
+        """The first reading of the longest run of newest readings whose intervals still intersect.
+
+        Walking back from the newest reading, the intersection only changes at a kept reading (any other
+        is beaten by a later one in both bounds), so the kept ones, merged newest first, decide it.
+        """
+        events = sorted((*self._max_lower, *self._min_upper), key=lambda r: r.seq, reverse=True)
+        low, high = float("-inf"), float("inf")
+        for reading in events:
+            low, high = max(low, reading.lower), min(high, reading.upper)
+            if low >= high:
+                return reading.seq + 1
+        return events[-1].seq
 
     def _judge(self) -> ClockTransition | None:
         assert self._skew is not None
@@ -158,14 +155,14 @@ class ClockTracker:
     @property
     def offset_s(self) -> float | None:
         """CNC UTC time minus gateway monotonic time (middle of the feasible interval)."""
-        if not self._readings:
+        if not self._count:
             return None
         return (self._low + self._high) / 2
 
     @property
     def uncertainty_s(self) -> float | None:
         """Half-width of the feasible interval: how far the estimate can be off."""
-        return (self._high - self._low) / 2 if self._readings else None
+        return (self._high - self._low) / 2 if self._count else None
 
     @property
     def skew_s(self) -> float | None:
@@ -190,7 +187,7 @@ class ClockTracker:
 
     def reset(self) -> None:
         """Forget every reading (a different CNC behind the same address, or a clock set on purpose)."""
-        self._readings.clear()
+        self._count = 0
         self._max_lower.clear()
         self._min_upper.clear()
         self._low, self._high = float("-inf"), float("inf")

@@ -5,8 +5,10 @@ from datetime import UTC, datetime, timedelta
 from zoneinfo import ZoneInfo
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from edge.collect.clock import ClockTracker, ClockTransition, cnc_to_utc_seconds
+from edge.collect.clock import MAX_READINGS, ClockTracker, ClockTransition, cnc_to_utc_seconds
 
 T0 = 1_790_000_000.0  # gateway wall time at monotonic 0 (an arbitrary 2026 moment)
 
@@ -129,3 +131,56 @@ def test_one_reading_is_at_most_half_a_second_off() -> None:
     tracker.observe(cnc.wall(T0), 0.0, T0)
     assert tracker.uncertainty_s == pytest.approx(0.5)
     assert abs(tracker.source_time_ms(0.0, T0) - (T0 + 37.9) * 1000) <= 500
+
+
+class WholeWindowTracker:
+    """The tracker's rule stated plainly (every reading of the window kept and scanned): the reference
+    the real tracker, which keeps only the readings that can still be an extreme, must agree with."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self.readings: list[tuple[float, float, float]] = []  # (lower, upper, monotonic)
+        self.restarts = 0
+
+    def observe(self, cnc_wall: datetime, mono: float, half_rtt: float) -> None:
+        base = cnc_to_utc_seconds(cnc_wall, ZoneInfo("UTC")) - mono
+        margin = max(half_rtt, 0.0)
+        self.readings.append((base - margin, base + 1.0 + margin, mono))
+        self.readings = [r for r in self.readings[-MAX_READINGS:] if mono - r[2] <= self.window_s]
+        if max(r[0] for r in self.readings) >= min(r[1] for r in self.readings):
+            self.restarts += 1
+            low, high, keep = float("-inf"), float("inf"), 0
+            for lower, upper, _ in reversed(self.readings):
+                low, high = max(low, lower), min(high, upper)
+                if low >= high:
+                    break
+                keep += 1
+            self.readings = self.readings[-keep:]
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return max(r[0] for r in self.readings), min(r[1] for r in self.readings)
+
+
+steps = st.tuples(st.floats(0.01, 3.0), st.sampled_from([0.0, 0.0, 0.0, 0.4, -2.0, 30.0, 3600.0]),
+                  st.floats(0.0, 0.05))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(steps, min_size=1, max_size=700), st.sampled_from([5.0, 60.0, 300.0]))
+def test_kept_extremes_agree_with_scanning_the_whole_window(run_steps: list[tuple[float, float, float]],
+                                                           window_s: float) -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60, window_s=window_s)
+    reference = WholeWindowTracker(window_s)
+    cnc = FakeCnc(12.3)
+    mono = 0.0
+    for advance, jump, half_rtt in run_steps:
+        mono += advance
+        cnc.offset += jump
+        wall = cnc.wall(T0 + mono)
+        tracker.observe(wall, mono, T0 + mono, half_rtt)
+        reference.observe(wall, mono, half_rtt)
+        low, high = reference.interval
+        assert tracker.offset_s == (low + high) / 2
+        assert tracker.uncertainty_s == (high - low) / 2
+        assert tracker.restarts == reference.restarts
