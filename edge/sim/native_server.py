@@ -583,11 +583,15 @@ class NativeServer:
                         self.state.name, peer, exc)
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
+        except asyncio.CancelledError:
+            # The simulator is shutting down. Ending cancelled would make asyncio's stream callback log
+            # a CancelledError traceback for a connection nobody is waiting on.
+            pass
         finally:
             self._sessions.discard(writer)
             writer.close()
-            with contextlib.suppress(Exception):
-                await writer.wait_closed()
+        with contextlib.suppress(Exception, asyncio.CancelledError):
+            await writer.wait_closed()
 
     async def _converse(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         decoder = FrameDecoder()
