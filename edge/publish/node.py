@@ -385,16 +385,19 @@ class SparkplugNode:
         good = Quality.GOOD
         last_ts = -1
         stamp = b""
+        double_size = 0
         for s in sorted(samples, key=_by_timestamp):
             alias, value_field, mtype, _ = encoders[s.name]
             if s.timestamp_ms != last_ts:  # sorted: equal timestamps are adjacent
                 last_ts = s.timestamp_ms
                 stamp = dd.timestamp_field(last_ts)
+                double_size = len(stamp) + 9  # a double metric's body, but for its alias field
             value = s.value
             if s.quality is good and not s.historical and (not not_good or s.name not in not_good):
-                if value_field is double_field and type(value) is float:  # most values: inline
-                    body = alias + stamp + double(0x69, value)
-                elif value is not None and (data := value_field(value)) is not None:
+                if value_field is double_field and type(value) is float:  # most values: no concatenation
+                    parts += (headers[len(alias) + double_size], alias, stamp, double(0x69, value))
+                    continue
+                if value is not None and (data := value_field(value)) is not None:
                     body = alias + stamp + data
                 else:
                     append(self._metric(s, alias + stamp, mtype, not_good))
