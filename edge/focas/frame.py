@@ -39,8 +39,8 @@ CLASS_PMC = 2
 
 _HEADER = struct.Struct(">4sHHH")
 _REQUEST_SUB = struct.Struct(">HHHHiiiii")
-_RESPONSE_SUB = struct.Struct(">HHHHhh2sH")
-_U16 = struct.Struct(">H")
+RESPONSE_SUB_LAYOUT = struct.Struct(">HHHHhh2sH")
+U16_LAYOUT = struct.Struct(">H")
 
 
 class PduType(enum.IntEnum):
@@ -111,7 +111,7 @@ class ResponseSubpacket:
         length = RESPONSE_SUBPACKET_FIXED + len(self.payload)
         if length > 0xFFFF:
             raise ValueError(f"subpacket payload of {len(self.payload)} bytes does not fit a u16 length")
-        return _RESPONSE_SUB.pack(length, self.cls, self.path, self.command, self.rc, self.detail,
+        return RESPONSE_SUB_LAYOUT.pack(length, self.cls, self.path, self.command, self.rc, self.detail,
                                   b"\x00\x00", len(self.payload)) + self.payload
 
     def answers(self, request: RequestSubpacket) -> bool:
@@ -129,25 +129,25 @@ def request_subpacket(cls: int, command: int, a1: int = 0, a2: int = 0, a3: int 
 
 
 def encode_request_body(subpackets: Sequence[RequestSubpacket]) -> bytes:
-    return _U16.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
+    return U16_LAYOUT.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
 
 
 def encode_response_body(subpackets: Sequence[ResponseSubpacket]) -> bytes:
-    return _U16.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
+    return U16_LAYOUT.pack(len(subpackets)) + b"".join(s.encode() for s in subpackets)
 
 
 def _split_subpackets(body: bytes, minimum: int, what: str) -> list[bytes]:
     """Cut a data body into subpacket byte strings (each including its own length word)."""
     if len(body) < 2:
         raise ProtocolError(f"{what}: expected a 2-byte subpacket count, got a {len(body)}-byte body")
-    (count,) = _U16.unpack_from(body, 0)
+    (count,) = U16_LAYOUT.unpack_from(body, 0)
     chunks: list[bytes] = []
     offset = 2
     for index in range(count):
         if offset + 2 > len(body):
             raise ProtocolError(f"{what}: count says {count} subpackets but the body ends after {index} "
                                 f"(at byte {offset} of {len(body)})")
-        (length,) = _U16.unpack_from(body, offset)
+        (length,) = U16_LAYOUT.unpack_from(body, offset)
         if length < minimum:
             raise ProtocolError(f"{what}: subpacket {index} length {length} is below the minimum {minimum}")
         if offset + length > len(body):
@@ -176,7 +176,7 @@ def decode_response_body(body: bytes) -> list[ResponseSubpacket]:
     """The subpackets of a 0x2102 body; each payload length must match its subpacket length."""
     result = []
     for index, chunk in enumerate(_split_subpackets(body, RESPONSE_SUBPACKET_FIXED, "data response")):
-        length, cls, path, command, rc, detail, _pad, size = _RESPONSE_SUB.unpack_from(chunk, 0)
+        length, cls, path, command, rc, detail, _pad, size = RESPONSE_SUB_LAYOUT.unpack_from(chunk, 0)
         if size != length - RESPONSE_SUBPACKET_FIXED:
             raise ProtocolError(f"data response: subpacket {index} (command 0x{command:04x}) announces a "
                                 f"{size}-byte payload but its length {length} leaves room for "
@@ -205,18 +205,17 @@ def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None 
     `memo` (one cell per echo, kept by the caller between answers; a cell belongs to one request
     subpacket): a subpacket whose bytes are those last seen for its request is not parsed again; its
     previous Answer, the same tuple object, is returned (it passed every check then, against the same
-    echo). Most subpackets
-    of a poll repeat, so this is most of the work saved; the caller can tell "unchanged" by identity.
+    echo). Most subpackets of a poll repeat; the caller can tell "unchanged" by identity.
     """
     size = len(body)
     if size < 2:
         raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {size}-byte body")
-    (count,) = _U16.unpack_from(body, 0)
+    (count,) = U16_LAYOUT.unpack_from(body, 0)
     if count != len(echoes):
         raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
     answers: list[Answer] = []
     offset = 2
-    unpack = _RESPONSE_SUB.unpack_from
+    unpack = RESPONSE_SUB_LAYOUT.unpack_from
     startswith = body.startswith
     for index, echo in enumerate(echoes):
         if memo is not None:
@@ -265,7 +264,7 @@ def encode_response(subpackets: Sequence[ResponseSubpacket],
 
 
 def encode_open_request(stream: OpenStream = OpenStream.DATA) -> bytes:
-    return Frame(REQUEST_VERSION, PduType.OPEN_REQUEST, _U16.pack(stream)).encode()
+    return Frame(REQUEST_VERSION, PduType.OPEN_REQUEST, U16_LAYOUT.pack(stream)).encode()
 
 
 def encode_open_response(payload: bytes = b"", version: int = DEFAULT_RESPONSE_VERSION) -> bytes:

@@ -23,7 +23,7 @@ from edge.focas.model import ParamRecord, ParamType, PmcType
 
 SCALED_SIZE = 8
 NO_VALUE = b"\xff\xff\xff\xff\x00\x0a\xff\xff"
-_SCALED = struct.Struct(">iBBh")
+SCALED_LAYOUT = struct.Struct(">iBBh")
 _I32_MIN, _I32_MAX = -(2**31), 2**31 - 1
 # Published captures only show exponents 0..8; a wider band still decodes, beyond it a slot is garbage.
 MAX_EXPONENT = 64
@@ -44,7 +44,7 @@ def decode_scaled(data: bytes, offset: int = 0, *, strict: bool = True) -> Scale
     if len(data) < offset + SCALED_SIZE:
         raise ProtocolError(f"expected an 8-byte scaled value at offset {offset}, "
                             f"got {max(0, len(data) - offset)} bytes")
-    mantissa, _zero, base, exponent = _SCALED.unpack_from(data, offset)
+    mantissa, _zero, base, exponent = SCALED_LAYOUT.unpack_from(data, offset)
     if exponent == -1:
         return None
     if exponent == 0:  # no scaling: the base does not matter (an all-zero slot reads as 0)
@@ -74,6 +74,15 @@ def encode_scaled(value: float | None, exponent: int | None = None) -> bytes:
     """
     if value is None:
         return NO_VALUE
+    if exponent is None:
+        quick = _plain_decimal(value)
+        if quick is not None:
+            return quick
+    return _encode_decimal(value, exponent)
+
+
+def _encode_decimal(value: float, exponent: int | None) -> bytes:
+    """encode_scaled the general way: Decimal arithmetic over the candidate exponents."""
     if isinstance(value, float) and not math.isfinite(value):
         raise ValueError(f"cannot encode {value} as a scaled value")
     exact = Decimal(repr(value)) if isinstance(value, float) else Decimal(value)
@@ -91,7 +100,28 @@ def encode_scaled(value: float | None, exponent: int | None = None) -> bytes:
         raise ValueError(f"{value} does not fit a scaled value (i32 mantissa, exponent "
                          f"{candidates[0]}..{candidates[-1]})")
     mantissa, exp = best
-    return _SCALED.pack(mantissa, 0, 10, exp)
+    return SCALED_LAYOUT.pack(mantissa, 0, 10, exp)
+
+
+def _plain_decimal(value: float) -> bytes | None:
+    """The smallest-exponent encoding without Decimal, when the value's shortest repr is a plain decimal.
+
+    The smallest exponent at which Decimal(repr(value)) is an integer is the count of fraction digits
+    (trailing zeros dropped) of a repr without an exponent. When that is at most MAX_ENCODE_EXPONENT and
+    the digits fit an i32, the digits are the mantissa. Anything else (1e-05, inf, nan, big ints): None.
+    """
+    if value.__class__ is float:
+        text = repr(value)
+        if "e" in text or "n" in text:
+            return None
+        whole, _, fraction = text.partition(".")
+        fraction = fraction.rstrip("0")
+        mantissa = int(whole + fraction)
+        if len(fraction) <= MAX_ENCODE_EXPONENT and _I32_MIN <= mantissa <= _I32_MAX:
+            return SCALED_LAYOUT.pack(mantissa, 0, 10, len(fraction))
+    elif value.__class__ is int and _I32_MIN <= value <= _I32_MAX:
+        return SCALED_LAYOUT.pack(value, 0, 10, 0)
+    return None
 
 
 def encode_scaled_list(values: Sequence[float | None]) -> bytes:
@@ -143,12 +173,12 @@ class SlotForm(enum.IntEnum):
     SCALED = 8  # 0x8d / 0x93: 30i, 31i, 32i (and 0i-F)
 
 
-_RECORD_HEAD = struct.Struct(">ihh")
+RECORD_HEAD_LAYOUT = struct.Struct(">ihh")
 ALL_AXES = -1
 
 
 def record_stride(max_axis: int, form: SlotForm) -> int:
-    return _RECORD_HEAD.size + max_axis * int(form)
+    return RECORD_HEAD_LAYOUT.size + max_axis * int(form)
 
 
 def _decode_slot4(slot: bytes, ptype: int) -> int:
@@ -180,9 +210,9 @@ def decode_records(payload: bytes, max_axis: int, form: SlotForm) -> list[ParamR
                             f"slots), got a {len(payload)}-byte payload")
     records = []
     for start in range(0, len(payload), stride):
-        number, axis, ptype = _RECORD_HEAD.unpack_from(payload, start)
+        number, axis, ptype = RECORD_HEAD_LAYOUT.unpack_from(payload, start)
         slots = max_axis if axis == ALL_AXES else 1
-        base = start + _RECORD_HEAD.size
+        base = start + RECORD_HEAD_LAYOUT.size
         values: list[int | float | None] = []
         for i in range(slots):
             offset = base + i * int(form)
@@ -209,7 +239,7 @@ def encode_records(records: Sequence[ParamRecord], max_axis: int, form: SlotForm
     for record in records:
         if len(record.values) > max_axis:
             raise ValueError(f"record {record.number} has {len(record.values)} values, max_axis {max_axis}")
-        out += _RECORD_HEAD.pack(record.number, record.axis, record.type)
+        out += RECORD_HEAD_LAYOUT.pack(record.number, record.axis, record.type)
         padded = list(record.values) + [0] * (max_axis - len(record.values))
         for value in padded:
             out += _encode_slot4(value, record.type) if form is SlotForm.FOUR_BYTE else encode_scaled(value)

@@ -278,13 +278,8 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        names = list(map(_name_of, samples))
-        if all(map(dev.specs.__contains__, names)):
-            known = samples
-        else:
-            known = self._known(device_id, dev, samples)
-            names = list(map(_name_of, known))
-        dev.last.update(zip(names, known, strict=True))
+        known = self._known(device_id, dev, samples)
+        dev.last.update(zip(map(_name_of, known), known, strict=True))
         if not (self.live and dev.online) or not known:
             return []
         return [self._data(dev.data_topic, dev, known)]
@@ -400,18 +395,19 @@ class SparkplugNode:
                 if value is not None and (data := value_field(value)) is not None:
                     body = alias + stamp + data
                 else:
-                    append(self._metric(s, alias + stamp, mtype, not_good))
+                    append(self._metric(s, alias + stamp, value_field, mtype, not_good))
                     continue
                 try:
                     append(headers[len(body)] + body)
                 except IndexError:  # a body of 128 bytes or more: a longer length varint
                     append(dd.metric_record(body))
                 continue
-            append(self._metric(s, alias + stamp, mtype, not_good))
+            append(self._metric(s, alias + stamp, value_field, mtype, not_good))
         append(tail)
         return Outgoing(topic, b"".join(parts))
 
-    def _metric(self, s: Sample, head: bytes, mtype: MetricType, not_good: set[str]) -> bytes:
+    def _metric(self, s: Sample, head: bytes, value_field: dd.ValueField, mtype: MetricType,
+                not_good: set[str]) -> bytes:
         """One metric record the general way: null, historical, Quality, runtime-encoded values, errors."""
         name = s.name
         value = s.value
@@ -420,7 +416,7 @@ class SparkplugNode:
             flags += dd.NULL
             data = b""
         else:
-            fast = dd.VALUE_FIELDS[mtype](value)
+            fast = value_field(value)
             if fast is not None:
                 data = fast
             else:

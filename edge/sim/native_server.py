@@ -46,7 +46,9 @@ from edge.focas.errors import (
 )
 from edge.focas.frame import (
     REQUEST_SUBPACKET_FIXED,
+    RESPONSE_SUB_LAYOUT,
     RESPONSE_SUBPACKET_FIXED,
+    U16_LAYOUT,
     Frame,
     FrameDecoder,
     PduType,
@@ -59,7 +61,7 @@ from edge.focas.frame import (
 )
 from edge.focas.functions import Context, Function, error_response
 from edge.focas.model import ParamRecord, PmcType
-from edge.focas.values import MAX_ENCODE_EXPONENT, encode_scaled
+from edge.focas.values import RECORD_HEAD_LAYOUT, encode_scaled
 from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.profiles import Profile
 from edge.sim.state import MachineState
@@ -239,12 +241,7 @@ def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPl
 
 
 # ---- the fast path: one compiled answer per request subpacket, byte-identical to answer_subpacket ------
-_RESPONSE_HEAD = struct.Struct(">HHHHhh2sH")  # edge.focas.frame's response subpacket layout
-_RECORD_HEAD = struct.Struct(">ihh")  # edge.focas.values' parameter/diagnosis record head
-_SCALED = struct.Struct(">iBBh")  # edge.focas.values' 8-byte scaled value
-_U16 = struct.Struct(">H")
 _TIMER_LE = struct.Struct("<ii")
-_I32_MIN, _I32_MAX = -(2**31), 2**31 - 1
 _MAX_PAYLOAD = 0xFFFF - RESPONSE_SUBPACKET_FIXED
 _ZERO_SLOT = encode_scaled(0)  # the padding slot of a 30i-form record
 # PMC data types whose elements unpack and pack back to the very same bytes (not float: NaN payloads).
@@ -261,32 +258,11 @@ def scaled_bytes(value: float | None) -> bytes:
     key = (value.__class__, value)
     known = _scaled_known.get(key)
     if known is None:
-        known = _encode_scaled_quickly(value)
+        known = encode_scaled(value)
         if len(_scaled_known) >= SCALED_CACHE_LIMIT:
             _scaled_known.clear()
         _scaled_known[key] = known
     return known
-
-
-def _encode_scaled_quickly(value: float | None) -> bytes:
-    """encode_scaled's bytes without Decimal when the shortest repr is a plain decimal that fits.
-
-    encode_scaled picks the smallest exponent at which Decimal(repr(value)) is an integer; for a repr
-    without an exponent that is the count of fraction digits (trailing zeros dropped). When that is at
-    most MAX_ENCODE_EXPONENT and the digits fit an i32, every smaller exponent fits too, so the answer
-    is the digits themselves. Anything else (ints beyond i32, 1e-05, inf, nan, None) goes to encode_scaled.
-    """
-    if value.__class__ is float:
-        text = repr(value)
-        if "e" not in text and "n" not in text:
-            whole, _, fraction = text.partition(".")
-            fraction = fraction.rstrip("0")
-            mantissa = int(whole + fraction)
-            if len(fraction) <= MAX_ENCODE_EXPONENT and _I32_MIN <= mantissa <= _I32_MAX:
-                return _SCALED.pack(mantissa, 0, 10, len(fraction))
-    elif value.__class__ is int and _I32_MIN <= value <= _I32_MAX:
-        return _SCALED.pack(value, 0, 10, 0)
-    return encode_scaled(value)
 
 
 def _scaled_list_bytes(values: Sequence[float | None]) -> bytes:
@@ -301,7 +277,7 @@ def _scaled_records_bytes(records: Sequence[ParamRecord], max_axis: int) -> byte
         values = record.values
         if len(values) > max_axis:
             raise ValueError(f"record {record.number} has {len(values)} values, max_axis {max_axis}")
-        parts.append(_RECORD_HEAD.pack(record.number, record.axis, record.type))
+        parts.append(RECORD_HEAD_LAYOUT.pack(record.number, record.axis, record.type))
         parts.extend(map(scaled_bytes, values))
         parts.append(_ZERO_SLOT * (max_axis - len(values)))
     return b"".join(parts)
@@ -384,7 +360,7 @@ def _guarded(req: RequestSubpacket, payload_of: AnswerSource) -> AnswerSource:
         size = len(payload)
         if size > _MAX_PAYLOAD:
             raise SubpacketTooLong(f"subpacket payload of {size} bytes does not fit a u16 length")
-        return _RESPONSE_HEAD.pack(RESPONSE_SUBPACKET_FIXED + size, cls, path, command, 0, 0, b"\x00\x00",
+        return RESPONSE_SUB_LAYOUT.pack(RESPONSE_SUBPACKET_FIXED + size, cls, path, command, 0, 0, b"\x00\x00",
                                    size) + payload
 
     return answer
@@ -426,13 +402,13 @@ def _request_chunks(body: bytes) -> list[bytes]:
     ProtocolError (the same checks, so the same bodies fail)."""
     size = len(body)
     if size >= 2:
-        (count,) = _U16.unpack_from(body, 0)
+        (count,) = U16_LAYOUT.unpack_from(body, 0)
         chunks = []
         offset = 2
         for _ in range(count):
             if offset + 2 > size:
                 break
-            (length,) = _U16.unpack_from(body, offset)
+            (length,) = U16_LAYOUT.unpack_from(body, offset)
             if length < REQUEST_SUBPACKET_FIXED or offset + length > size:
                 break
             chunks.append(body[offset : offset + length])
@@ -473,7 +449,7 @@ class AnswerPlans:
         return result
 
     def _compile(self, chunk: bytes, ctx: Context) -> AnswerPlan:
-        (request,) = decode_request_body(_U16.pack(1) + chunk)
+        (request,) = decode_request_body(U16_LAYOUT.pack(1) + chunk)
         plan = compile_plan(self.state, request, ctx)
         if not request.extra:
             if len(self._plans) >= PLAN_CACHE_LIMIT:
@@ -484,7 +460,7 @@ class AnswerPlans:
 
 def encode_planned_response(plans: Sequence[AnswerPlan], version: int) -> bytes:
     """The 0x2102 PDU answering `plans` now: what encode_response gives for answer_subpacket's answers."""
-    parts = [_U16.pack(len(plans))]
+    parts = [U16_LAYOUT.pack(len(plans))]
     too_long: SubpacketTooLong | None = None
     for plan in plans:
         try:

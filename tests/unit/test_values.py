@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from edge.focas import values as values_module
 from edge.focas.errors import ProtocolError
 from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.values import (
@@ -198,3 +199,17 @@ def test_records_decode_only_raises_protocol_error(data: bytes, max_axis: int, f
         decode_records(data, max_axis, form)
     except ProtocolError:
         assert len(data) % record_stride(max_axis, form)
+
+
+@given(st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.floats(min_value=-3e9, max_value=3e9),
+    st.decimals(min_value=-2_147_483, max_value=2_147_483, places=3, allow_nan=False,
+                allow_infinity=False).map(float),
+    st.decimals(min_value=-2, max_value=2, places=10, allow_nan=False, allow_infinity=False).map(float),
+    st.integers(min_value=-(2**40), max_value=2**40)))
+def test_plain_decimal_shortcut_gives_the_decimal_encoding(value: float) -> None:
+    """encode_scaled skips Decimal for plain decimals; where it does, the bytes are Decimal's."""
+    quick = values_module._plain_decimal(value)
+    if quick is not None:
+        assert quick == values_module._encode_decimal(value, None)
