@@ -26,6 +26,10 @@ class MetricType(enum.Enum):
     STRING = "String"
     DATETIME = "DateTime"  # epoch milliseconds, UTC
 
+    # Members are singletons compared by identity: hash them by identity too, in C. Enum's own __hash__
+    # is Python code (hash of the name), and every published value is looked up by its type.
+    __hash__ = object.__hash__
+
 
 class Quality(enum.IntEnum):
     """OPC-style quality codes as Sparkplug hosts (Ignition) read the `Quality` property."""

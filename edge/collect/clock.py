@@ -90,7 +90,23 @@ class ClockTracker:
         `half_rtt_s` (half the request's round trip) widens the reading's interval: the CNC sampled its
         clock somewhere inside the request, not necessarily at its midpoint.
         """
-        base = cnc_to_utc_seconds(cnc_wall, self.zone) - gateway_monotonic
+        return self.observe_epoch(cnc_to_utc_seconds(cnc_wall, self.zone), gateway_monotonic, gateway_wall,
+                                  half_rtt_s)
+
+    def narrows(self, cnc_epoch_s: float, gateway_monotonic: float, half_rtt_s: float = 0.0) -> bool:
+        """Whether this reading (the CNC time as epoch seconds) would tighten the current interval.
+
+        A poller reads the same CNC second about ten times: only a reading that moves a bound needs
+        observing (the first of a second raises the lower bound, a later one may lower the upper).
+        """
+        base = cnc_epoch_s - gateway_monotonic
+        margin = max(half_rtt_s, 0.0)
+        return base - margin > self._low or base + 1.0 + margin < self._high
+
+    def observe_epoch(self, cnc_epoch_s: float, gateway_monotonic: float, gateway_wall: float,
+                      half_rtt_s: float = 0.0) -> ClockTransition | None:
+        """As observe(), with the CNC time already converted to epoch seconds (UTC)."""
+        base = cnc_epoch_s - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
         self._count += 1
         self._add(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic, self._count))

@@ -16,10 +16,11 @@ import enum
 import json
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
-from edge.focas.model import ActiveAlarm, ParamRecord, PmcType, StatInfo, SysInfo
+from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
 from edge.samples import MetricSpec, MetricType
 
 PART_COUNT_PARAM = 6711
@@ -36,6 +37,9 @@ class Group(enum.Enum):
     PARAMS = "params"
     DIAGS = "diags"
     ALARM_HISTORY = "alarm_history"
+
+    # Identity hash, in C (Enum's is Python code): the schedule hashes groups on every tick.
+    __hash__ = object.__hash__
 
 
 # ---- value tables ------------------------------------------------------------------------------------------
@@ -259,13 +263,29 @@ ValueExtractor = Callable[[object], list[object]]
 
 def value_extractor(read: PlannedRead) -> ValueExtractor:
     """A function from the read's result to its metrics' values (in `read.metrics` order, each coerced to
-    its metric's type). Built once per read and session: a poll tick calls it for every read."""
-    item = read.item
+    its metric's type). Built once per read and session: a poll tick calls it for every read that moved,
+    so what depends only on the read (how to pick the values, which coercion) is decided here."""
+    pick = _picker(read.item)
     coercers = [_COERCERS.get(spec.type, _unchanged) for spec in read.metrics]
+    count = len(coercers)
     bits = read.bits
+    if not bits and all(coerce is _to_float for coerce in coercers):  # positions, macros, feed, loads
+
+        def floats(result: object) -> list[object]:
+            values = pick(result)
+            return [v if type(v) is float else _to_float(v) for v in values[:count]]
+
+        return floats
+    if not bits and all(coerce is _to_int for coerce in coercers):  # PMC ranges, integer parameters
+
+        def ints(result: object) -> list[object]:
+            values = pick(result)
+            return [v if type(v) is int else _to_int(v) for v in values[:count]]
+
+        return ints
 
     def extract(result: object) -> list[object]:
-        values = _extract(item, result)
+        values = pick(result)
         if bits:
             values = [bool(int(byte) >> bit & 1) for byte in values for bit in range(8)]  # type: ignore[call-overload]
         return [coerce(value) for coerce, value in zip(coercers, values, strict=False)]
@@ -273,30 +293,36 @@ def value_extractor(read: PlannedRead) -> ValueExtractor:
     return extract
 
 
-def _extract(item: it.ReadItem, result: object) -> list[object]:
+def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
+    """How a result of this item becomes its metrics' raw values, in order."""
     match item:
         case it.ReadStatus():
-            assert isinstance(result, StatInfo)
-            return [pick(result) for _, pick in STATUS_METRICS]
+            return lambda result: [pick(result) for _, pick in STATUS_METRICS]
         case it.ReadSysInfo():
-            assert isinstance(result, SysInfo)
-            return [pick(result) for _, pick in SYSINFO_METRICS]
+            return lambda result: [pick(result) for _, pick in SYSINFO_METRICS]
         case it.ReadProgramNumber():
-            return [result.running, result.main]  # type: ignore[attr-defined]
+            return lambda result: [result.running, result.main]
         case it.ReadActiveAlarms():
-            alarms = list(result)  # type: ignore[call-overload]
-            return [active_alarms_json(alarms), len(alarms)]
+            return _alarm_values
         case it.ReadAxisNames() | it.ReadSpindleNames():
-            return [",".join(str(name) for name in result)]  # type: ignore[attr-defined]
+            return lambda result: [",".join(str(name) for name in result)]
         case it.ReadParams() | it.ReadDiag():
-            records: list[ParamRecord] = list(result)  # type: ignore[call-overload]
-            return [r.value for r in records]
+            return lambda result: [record.value for record in result]
         case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions():
-            return list(result)  # type: ignore[call-overload]
+            return _as_list
         case it.ReadAlarmHistory():
-            return []  # published per entry as events, see edge.collect.alarms
+            return lambda result: []  # published per entry as events, see edge.collect.alarms
         case _:
-            return [result]
+            return lambda result: [result]
+
+
+def _as_list(result: Any) -> Sequence[object]:
+    return result if type(result) is list else list(result)
+
+
+def _alarm_values(result: Any) -> list[object]:
+    alarms = list(result)
+    return [active_alarms_json(alarms), len(alarms)]
 
 
 def active_alarms_json(alarms: Sequence[ActiveAlarm]) -> str:

@@ -14,12 +14,15 @@ import contextlib
 import enum
 import json
 import logging
+import operator
 import random
 import time
 from bisect import bisect_left
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
+from itertools import compress
+from operator import is_not
 from pathlib import Path
 from typing import Protocol
 
@@ -28,7 +31,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.changes import ChangeDetector
-from edge.collect.clock import ClockTracker
+from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
 from edge.collect.tickgrid import TickGrid
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
@@ -110,21 +113,37 @@ _NOTHING = object()  # no previous result (compares unequal to any result)
 @dataclass(frozen=True, slots=True)
 class TickBatch:
     """One combination of due groups, prepared once per plan: the reads, the request items (the clock
-    last; a stable tuple, so the client reuses its encoded request), and per read its kind and extractor."""
+    last; a stable tuple, so the client reuses its encoded request), per read its kind and extractor, and
+    where each read keeps its last result in the poller's per-plan list (`previous` fetches them all)."""
 
     reads: tuple[pl.PlannedRead, ...]
     items: tuple[it.ReadItem, ...]
     kinds: tuple[ReadKind, ...]
     extractors: tuple[pl.ValueExtractor, ...]
+    positions: tuple[int, ...]  # per read, its index in the plan's reads
+    previous: Callable[[list[object]], tuple[object, ...]]  # the per-plan list -> this batch's entries
+    indices: range  # 0..len(reads)-1
 
     @classmethod
     def build(cls, reads: Sequence[pl.PlannedRead],
-              extractor: Callable[[pl.PlannedRead], pl.ValueExtractor] = pl.value_extractor) -> TickBatch:
+              extractor: Callable[[pl.PlannedRead], pl.ValueExtractor] = pl.value_extractor,
+              positions: Sequence[int] | None = None) -> TickBatch:
         kinds = tuple(ReadKind.ALARM_STATUS if isinstance(r.item, it.ReadAlarmStatus)
                       else ReadKind.ALARM_HISTORY if isinstance(r.item, it.ReadAlarmHistory)
                       else ReadKind.VALUES for r in reads)
+        where = tuple(range(len(reads)) if positions is None else positions)
+        if len(where) != len(reads):
+            raise ValueError(f"{len(where)} positions for {len(reads)} reads")
+        previous: Callable[[list[object]], tuple[object, ...]]
+        if len(where) == 1:  # itemgetter of one index returns the item, not a 1-tuple
+            (only,) = where
+            previous = lambda last: (last[only],)  # noqa: E731
+        elif where:
+            previous = operator.itemgetter(*where)
+        else:
+            previous = lambda last: ()  # noqa: E731
         return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
-                   tuple(extractor(r) for r in reads))
+                   tuple(extractor(r) for r in reads), where, previous, range(len(reads)))
 
 
 SessionFactory = Callable[[MachineConfig], CncSession]
@@ -163,7 +182,11 @@ class MachinePoller:
         self._batches: dict[frozenset[pl.Group], TickBatch] = {}
         self._extractors: dict[int, pl.ValueExtractor] = {}  # id(read) of the current plan's reads
         self._batches_plan: pl.MachinePlan | None = None
-        self._last_raw: dict[int, object] = {}  # id(read) -> its last good result (reads that did not move)
+        # Per read of the current plan (by index in plan.reads), its last good result: a read whose
+        # result is that very object again did not move (the client hands an unchanged answer's value back).
+        self._last_raw: list[object] = []
+        self._clock_reading: object = _NOTHING  # the CNC clock value of the last tick (unchanged within a second)
+        self._clock_epoch = 0.0  # that value as epoch seconds
         self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
         self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
 
@@ -249,7 +272,8 @@ class MachinePoller:
         schedule.start(time.monotonic())
         schedule.due(time.monotonic())  # static group already read above
         self._changes = ChangeDetector(plan.deadbands())
-        self._last_raw.clear()
+        self._last_raw = [_NOTHING] * len(plan.reads)
+        self._clock_reading = _NOTHING
         first = await self._tick(plan, set(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
@@ -312,10 +336,13 @@ class MachinePoller:
             self._batches.clear()
             self._extractors.clear()
             self._batches_plan = plan
+            self._last_raw = [_NOTHING] * len(plan.reads)  # indices changed: every read counts as moved
         key = frozenset(groups - _NOT_IN_TICK)  # combinations that differ only there share one batch
         batch = self._batches.get(key)
         if batch is None:
-            batch = TickBatch.build(plan.reads_for(key), self._extractor)
+            reads = plan.reads_for(key)
+            index = {id(read): i for i, read in enumerate(plan.reads)}
+            batch = TickBatch.build(reads, self._extractor, [index[id(read)] for read in reads])
             self._batches[key] = batch
         return batch
 
@@ -337,7 +364,8 @@ class MachinePoller:
         self.stats.record_cycle(mono_after - mono_before)
         mid_mono = (mono_before + mono_after) / 2
         mid_wall = (wall_before + wall_after) / 2
-        timestamp = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
+        clock_observed = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
+        timestamp = self.clock.source_time_ms(mid_mono, mid_wall)
 
         samples: list[Sample] = []
         events: list[Sample] = []
@@ -345,36 +373,51 @@ class MachinePoller:
         history: list[AlarmHistoryEntry] | None = None
         last_raw = self._last_raw
         report = self._changes.report
-        for read, kind, extract, result in zip(batch.reads, batch.kinds, batch.extractors, results, strict=False):
-            key = id(read)
+        # Only the reads whose result is not the very object they gave last time (found in C: most reads
+        # of a tick do not move). Errors are new objects every time, alarm history is never kept.
+        for index in compress(batch.indices, map(is_not, results, batch.previous(last_raw))):
+            read, result, position = batch.reads[index], results[index], batch.positions[index]
             if isinstance(result, FocasError):
-                last_raw.pop(key, None)
+                last_raw[position] = _NOTHING
                 self._item_failed(read, result, timestamp, samples)
                 continue
-            if kind is ReadKind.ALARM_STATUS:
-                alarm_status = int(result)
-            elif kind is ReadKind.ALARM_HISTORY:
+            kind = batch.kinds[index]
+            if kind is ReadKind.ALARM_HISTORY:
                 history = list(result)
                 continue
-            previous = last_raw.get(key, _NOTHING)
-            if previous is result or previous == result:
-                continue  # nothing this read feeds has moved since the last tick (the client hands an
-                # unchanged answer's value back as the same object)
-            last_raw[key] = result
+            if result == last_raw[position]:
+                last_raw[position] = result
+                continue  # an equal value decoded anew: nothing this read feeds has moved
+            last_raw[position] = result
+            if kind is ReadKind.ALARM_STATUS:
+                alarm_status = int(result)
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
-            for spec, value in zip(read.metrics, extract(result), strict=False):
+            for spec, value in zip(read.metrics, batch.extractors[index](result), strict=False):
                 sample = report(spec.name, value, spec.type, timestamp)
                 if sample is not None:
                     samples.append(sample)
-        self._clock_samples(timestamp, samples)
+        if clock_observed:
+            self._clock_samples(timestamp, samples)
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
         return TickResult(samples, events, fresh)
 
-    def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> int:
+    def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
+        """Feed the tick's clock reading to the tracker; False when it changed nothing about the clock.
+
+        The CNC clock has one-second resolution, so most ticks read the same second again (the client
+        hands it back as the same object): such a reading is converted once and observed only when it
+        tightens the offset interval (ClockTracker.narrows), which after the first seconds is rare.
+        """
+        if result is self._clock_reading:
+            if not self.clock.narrows(self._clock_epoch, mid_mono, half_rtt):
+                return False
+            self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
+        elif isinstance(result, datetime):
+            self._clock_reading, self._clock_epoch = result, cnc_to_utc_seconds(result, self.clock.zone)
+            self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
         if isinstance(result, datetime):
-            self.clock.observe(result, mid_mono, mid_wall, half_rtt)
             using_gateway = self.clock.use_gateway_time
             if using_gateway != self._clock_mode_logged:
                 if using_gateway:
@@ -382,9 +425,11 @@ class MachinePoller:
                 else:
                     log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
                 self._clock_mode_logged = using_gateway
-        elif isinstance(result, FocasError):
-            self.stats.count_error(result)
-        return self.clock.source_time_ms(mid_mono, mid_wall)
+        else:
+            self._clock_reading = _NOTHING
+            if isinstance(result, FocasError):
+                self.stats.count_error(result)
+        return True
 
     def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
         skew = self.clock.skew_s

@@ -24,6 +24,7 @@ from tenacity import (
 )
 
 from edge.focas import items as it
+from edge.focas.deadline import Deadline, DeadlineWheel, wheel_for
 from edge.focas.errors import (
     ConnectionLost,
     FocasError,
@@ -71,6 +72,8 @@ class CncSession(abc.ABC):
         self._byte_locks: dict[tuple[str, int], asyncio.Lock] = {}
         self._param_locks: dict[tuple[int, int], asyncio.Lock] = {}
         self._connected = False
+        self._wheel: DeadlineWheel | None = None  # the request deadlines of the loop this session runs on
+        self._wheel_loop: asyncio.AbstractEventLoop | None = None
 
     # ---- transport hooks -------------------------------------------------------------------------
     @abc.abstractmethod
@@ -264,13 +267,32 @@ class CncSession(abc.ABC):
             await self._guarded(operation)
 
     async def _guarded(self, operation: Any) -> Any:
-        """Apply the request timeout; on timeout or protocol trouble, reset the session (never wedge)."""
+        """Apply the request timeout; on timeout or protocol trouble, reset the session (never wedge).
+
+        The timeout is a deadline on the loop's shared wheel (edge.focas.deadline), not an
+        asyncio.timeout: a poller runs this ten times a second per machine. Like asyncio.timeout (and
+        unlike wait_for on Python 3.11), a cancellation from outside is never mistaken for a timeout and
+        never swallowed, so a poller cannot survive its shutdown.
+        """
+        task = asyncio.current_task()
+        if task is None:  # pragma: no cover - always called from a task
+            raise RuntimeError("CncSession requests must run in an asyncio task")
+        loop = task.get_loop()
+        wheel = self._wheel
+        if wheel is None or loop is not self._wheel_loop:
+            wheel, self._wheel_loop = wheel_for(loop), loop
+            self._wheel = wheel
+        deadline = Deadline()
+        cancelling = task.cancelling()
+        wheel.arm(deadline, task, self.timeout)
         try:
-            # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a cancellation that
-            # arrives as the inner call completes, and a poller would then survive its shutdown.
-            async with asyncio.timeout(self.timeout):
+            try:
                 return await operation
-        except TimeoutError as exc:
+            finally:
+                wheel.disarm(deadline)
+        except asyncio.CancelledError as exc:
+            if not deadline.expired or task.uncancel() > cancelling:
+                raise  # cancelled from outside (shutdown): not a timeout
             await self.reset()
             raise FocasTimeout(f"{self.describe()}: no complete answer within {self.timeout}s") from exc
         except (ConnectionLost, OSError) as exc:

@@ -184,3 +184,40 @@ def test_kept_extremes_agree_with_scanning_the_whole_window(run_steps: list[tupl
         assert tracker.offset_s == (low + high) / 2
         assert tracker.uncertainty_s == (high - low) / 2
         assert tracker.restarts == reference.restarts
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.02, 0.3), st.floats(0.0, 0.05)), min_size=1, max_size=400),
+       st.floats(-50.0, 50.0))
+def test_observing_only_the_readings_that_narrow_gives_the_same_interval(
+        run_steps: list[tuple[float, float]], offset: float) -> None:
+    """What the poller does with the ~10 readings of each CNC second: skip those `narrows` rejects."""
+    everything = ClockTracker("UTC", max_skew_s=60, window_s=1e9)
+    selective = ClockTracker("UTC", max_skew_s=60, window_s=1e9)
+    cnc = FakeCnc(offset)
+    mono = 0.0
+    observed = 0
+    for advance, half_rtt in run_steps:
+        mono += advance
+        epoch = cnc_to_utc_seconds(cnc.wall(T0 + mono), ZoneInfo("UTC"))
+        everything.observe_epoch(epoch, mono, T0 + mono, half_rtt)
+        if selective.narrows(epoch, mono, half_rtt):
+            selective.observe_epoch(epoch, mono, T0 + mono, half_rtt)
+            observed += 1
+        assert selective.offset_s == everything.offset_s
+        assert selective.uncertainty_s == everything.uncertainty_s
+    assert observed <= len(run_steps)
+
+
+def test_a_steady_poll_observes_few_readings_once_the_offset_is_pinned() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    cnc = FakeCnc(7.37)
+    mono, observed, ticks = 0.0, 0, 600  # a minute at 10 Hz, phase drifting against the CNC second
+    for _ in range(ticks):
+        mono += 0.1003
+        epoch = cnc_to_utc_seconds(cnc.wall(T0 + mono), ZoneInfo("UTC"))
+        if tracker.narrows(epoch, mono, 0.001):
+            tracker.observe_epoch(epoch, mono, T0 + mono, 0.001)
+            observed += 1
+    assert observed < ticks / 5
+    assert abs(tracker.source_time_ms(mono, T0 + mono) / 1000 - (T0 + mono + 7.37)) < 0.02

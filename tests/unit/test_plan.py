@@ -12,11 +12,12 @@ from edge.collect.plan import (
     StaticInfo,
     axis_unit,
     metric_values,
+    value_extractor,
 )
 from edge.config import parse_config
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, ParamRecord, PmcType, ProgramNumbers, StatInfo, SysInfo
-from edge.samples import MetricType
+from edge.samples import MetricSpec, MetricType
 
 CONFIG = """
 mqtt: {host: b, formats: [json]}
@@ -163,3 +164,22 @@ def test_pmc_bit_range_publishes_one_boolean_per_bit() -> None:
     assert {m.type for m in read.metrics} == {MetricType.BOOLEAN} and all(m.writable for m in read.metrics)
     values = [v for _, v in metric_values(read, [0b0000_1001, 0b1000_0000])]
     assert values == [True, False, False, True, False, False, False, False] + [False] * 7 + [True]
+
+
+def _read(item: it.ReadItem, *types: MetricType, bits: bool = False) -> PlannedRead:
+    return PlannedRead(Group.MACROS, item, tuple(MetricSpec(f"m{i}", t) for i, t in enumerate(types)),
+                       bits=bits)
+
+
+def test_extractors_coerce_each_value_to_its_metric_type() -> None:
+    doubles = value_extractor(_read(it.ReadMacros(1, 4), *[MetricType.DOUBLE] * 3))
+    assert doubles([1, 2.5, None, 9.0]) == [1.0, 2.5, None]  # an int becomes a float, one value too many
+    assert [type(v) for v in doubles([1, 2.5, None])] == [float, float, type(None)]
+    ints = value_extractor(_read(it.ReadPmc("R", 0, 2, PmcType.BYTE), *[MetricType.UINT8] * 3))
+    assert ints([3, 4.0, 4.5]) == [3, 4, 4.5] and type(ints([3, 4.0, 4.5])[1]) is int
+    mixed = value_extractor(_read(it.ReadMacros(1, 2), MetricType.DOUBLE, MetricType.STRING))
+    assert mixed([7, 7]) == [7.0, 7]
+    bits = value_extractor(_read(it.ReadPmc("R", 0, 0, PmcType.BYTE), *[MetricType.BOOLEAN] * 8, bits=True))
+    assert bits([0b10000101]) == [True, False, True, False, False, False, False, True]
+    params = value_extractor(_read(it.ReadParams(6711, 6711), MetricType.INT32))
+    assert params([ParamRecord(6711, 0, 2, (12.0,))]) == [12]
