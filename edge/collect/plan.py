@@ -354,6 +354,9 @@ _COERCERS: dict[MetricType, Callable[[object], object]] = {
 # ---- when groups are due ---------------------------------------------------------------------------
 
 
+_GROUP_BITS = {group: 1 << index for index, group in enumerate(Group)}
+
+
 class Schedule:
     """Per-group due times for one session. Static is due once per connection; a group that fell
     behind is not caught up tick by tick: its next time moves past `now`, and the skipped periods
@@ -364,20 +367,22 @@ class Schedule:
         self._next: dict[Group, float] = {}
         self._static_pending = True
         self.skipped = 0
+        self._combinations: dict[int, frozenset[Group]] = {}  # bit mask of due groups -> that set
 
     def start(self, now: float) -> None:
         """A new connection: static data and every group are due at once."""
         self._next = dict.fromkeys(self.periods, now)
         self._static_pending = True
 
-    def due(self, now: float) -> set[Group]:
-        """The groups due at `now`; advances their next time."""
-        groups = {Group.STATIC} if self._static_pending else set()
+    def due(self, now: float) -> frozenset[Group]:
+        """The groups due at `now`; advances their next time. The same combination of groups is the same
+        frozenset object every time (the poller keys its prepared batches by it)."""
+        mask = _GROUP_BITS[Group.STATIC] if self._static_pending else 0
         self._static_pending = False
         for group, when in self._next.items():
             if when > now:
                 continue
-            groups.add(group)
+            mask |= _GROUP_BITS[group]
             period = self.periods[group]
             following = when + period
             if following <= now:
@@ -385,6 +390,9 @@ class Schedule:
                 self.skipped += missed
                 following += missed * period
             self._next[group] = following
+        groups = self._combinations.get(mask)
+        if groups is None:
+            groups = self._combinations[mask] = frozenset(g for g, bit in _GROUP_BITS.items() if mask & bit)
         return groups
 
     def next_due(self) -> float | None:

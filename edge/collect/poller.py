@@ -19,6 +19,7 @@ import random
 import time
 from bisect import bisect_left
 from collections.abc import Callable, Sequence
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from datetime import datetime
 from itertools import compress
@@ -179,7 +180,8 @@ class MachinePoller:
         self._dropped: set[str] = set()
         self._plan: pl.MachinePlan | None = None
         self._grid = grid or TickGrid()
-        self._batches: dict[frozenset[pl.Group], TickBatch] = {}
+        self._batches: dict[frozenset[pl.Group], TickBatch] = {}  # by the groups read in the tick
+        self._by_due: dict[AbstractSet[pl.Group], TickBatch] = {}  # by the groups the schedule said were due
         self._extractors: dict[int, pl.ValueExtractor] = {}  # id(read) of the current plan's reads
         self._batches_plan: pl.MachinePlan | None = None
         # Per read of the current plan (by index in plan.reads), its last good result: a read whose
@@ -274,7 +276,7 @@ class MachinePoller:
         self._changes = ChangeDetector(plan.deadbands())
         self._last_raw = [_NOTHING] * len(plan.reads)
         self._clock_reading = _NOTHING
-        first = await self._tick(plan, set(plan.periods))
+        first = await self._tick(plan, frozenset(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
         born = [*first.samples, *self._changes.filter(extra)]
@@ -330,13 +332,17 @@ class MachinePoller:
                      self.machine_id, operation, capabilities.transport)
         return missing
 
-    def _batch_for(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickBatch:
+    def _batch_for(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickBatch:
         """The reads of the due groups plus the clock, built once per plan and combination of groups."""
         if self._batches_plan is not plan:
             self._batches.clear()
+            self._by_due.clear()
             self._extractors.clear()
             self._batches_plan = plan
             self._last_raw = [_NOTHING] * len(plan.reads)  # indices changed: every read counts as moved
+        batch = self._by_due.get(groups)  # the schedule hands out one frozenset per combination
+        if batch is not None:
+            return batch
         key = frozenset(groups - _NOT_IN_TICK)  # combinations that differ only there share one batch
         batch = self._batches.get(key)
         if batch is None:
@@ -344,6 +350,7 @@ class MachinePoller:
             index = {id(read): i for i, read in enumerate(plan.reads)}
             batch = TickBatch.build(reads, self._extractor, [index[id(read)] for read in reads])
             self._batches[key] = batch
+        self._by_due[frozenset(groups)] = batch
         return batch
 
     def _extractor(self, read: pl.PlannedRead) -> pl.ValueExtractor:
@@ -353,7 +360,7 @@ class MachinePoller:
             found = self._extractors[id(read)] = pl.value_extractor(read)
         return found
 
-    async def _tick(self, plan: pl.MachinePlan, groups: set[pl.Group]) -> TickResult:
+    async def _tick(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickResult:
         """One batched round trip for the due groups; the samples returned are the changes only."""
         batch = self._batch_for(plan, groups)
         wall_before, mono_before = time.time(), time.monotonic()

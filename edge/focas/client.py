@@ -14,10 +14,10 @@ import contextlib
 import logging
 import struct
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import Any, cast
+from typing import cast
 
 from edge.focas import functions as fn
 from edge.focas import items as it
@@ -30,9 +30,7 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import (
-    Answer,
-    AnswerMemo,
-    Echo,
+    AnswerSplitter,
     Frame,
     FrameDecoder,
     PduType,
@@ -42,7 +40,6 @@ from edge.focas.frame import (
     encode_close_request,
     encode_open_request,
     encode_request,
-    split_response,
 )
 from edge.focas.functions import Context, Function
 from edge.focas.model import Capabilities, SysInfo
@@ -59,7 +56,6 @@ MAX_SUBPACKETS = 32
 CLOSE_TIMEOUT = 1.0
 WRITE_OPERATIONS = frozenset({"write_macro", "write_pmc", "set_clock"})
 PLAN_CACHE_SIZE = 1024  # a poll plan repeats the same few dozen items every tick
-CELL_CACHE_SIZE = 4 * PLAN_CACHE_SIZE  # memo cells: one per request subpacket and per item plan
 PREPARED_CACHE_SIZE = 16  # a poller repeats one or a few item tuples (one per combination of due groups)
 
 
@@ -129,26 +125,30 @@ class FrameStream(asyncio.Protocol):
 
 @dataclass(frozen=True, slots=True)
 class PreparedPdu:
-    """One request PDU of a batch, encoded, with what each answer must echo and the items it serves."""
+    """One request PDU of a batch, encoded, with the items it serves and what it last got back."""
 
     data: bytes
     requests: tuple[RequestSubpacket, ...]
-    echoes: tuple[Echo, ...]
     items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
-    memo: AnswerMemo  # per request, what was last answered to it (split_response reuses unchanged ones)
+    starts: tuple[int, ...]  # per entry of `items`, the index of its first answer subpacket
+    owners: tuple[int, ...]  # per request subpacket, the entry of `items` it serves
+    splitter: AnswerSplitter  # the last answer, to find the subpackets that moved
+    stale: set[int]  # entries of `items` to decode on the next answer whatever moved (new, or an error)
 
 
 @dataclass(frozen=True, slots=True)
 class PreparedBatch:
-    """A batch a caller repeats: its PDUs, and per item the last answer bytes with the value decoded
-    from them. Decoding is a pure function of (answer, request, context), so an item whose answer bytes
-    repeat gets the very same value object back without decoding (most reads of a poll tick do not
-    change), and a caller can tell "unchanged" by identity."""
+    """A batch a caller repeats: its PDUs, and per item the value decoded from the last answers.
+
+    Decoding is a pure function of (answer, request, context), so an item none of whose answer
+    subpackets moved keeps its value, the very same object, without decoding (most reads of a poll tick
+    do not change), and a caller can tell "unchanged" by identity. An item whose value is an error is
+    decoded again every time."""
 
     items: Sequence[it.ReadItem]
     context: Context
     pdus: tuple[PreparedPdu, ...]
-    last: list[list[tuple[object, ItemResult] | None]]  # per item, a cell: (its answers, its value)
+    values: list[ItemResult]  # per item, its value from the last answers
 
 
 class FocasClient(CncSession):
@@ -173,9 +173,7 @@ class FocasClient(CncSession):
         self._in_flight = False
         self._plans: dict[tuple[it.ReadItem, Context], ItemPlan] = {}
         self._prepared: dict[int, PreparedBatch] = {}
-        # One cell per request subpacket and per item plan, shared by every prepared batch that uses it (a
-        # poller's tick shapes overlap): keyed by id, the object pinned beside its cell.
-        self._cells: dict[int, tuple[object, list[Any]]] = {}
+        self._shared: dict[int, tuple[ItemPlan, object]] = {}  # id(plan) -> (plan, its last decoded value)
 
     def describe(self) -> str:
         return f"focas://{self.host}:{self.port}"
@@ -220,28 +218,42 @@ class FocasClient(CncSession):
 
     async def _batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
         prepared = self._prepare(items)
-        results: list[ItemResult] = [None] * len(items)
         context = self.context
-        last = prepared.last
+        values = prepared.values
         for pdu in prepared.pdus:
-            answers = await self._exchange_prepared(pdu) if pdu.echoes else []
-            offset = 0
-            for index, plan in pdu.items:
-                count = len(plan.calls)
-                if not count:  # nothing was asked (the plan itself is the item's error)
-                    results[index] = item_value(plan, answers, offset, context)
-                    continue
-                key = answers[offset] if count == 1 else tuple(answers[offset : offset + count])
-                cell = last[index]
-                previous = cell[0]
-                if previous is not None and (previous[0] is key or previous[0] == key):
-                    results[index] = previous[1]
+            stale = pdu.stale
+            if pdu.requests:
+                frame = await self._roundtrip(pdu.data, PduType.DATA_RESPONSE, "data request")
+                try:
+                    answers, moved = pdu.splitter.split(frame.body)
+                except ProtocolError as exc:
+                    raise ProtocolError(f"{self.describe()}: {exc}") from None
+            else:  # nothing asked: every item's plan is its error
+                answers, moved = [], []
+            if moved is None:
+                todo: Iterable[int] = range(len(pdu.items))
+            elif moved or stale:
+                owners = pdu.owners
+                todo = stale.union([owners[i] for i in moved])
+            else:
+                continue
+            starts, entries, shared = pdu.starts, pdu.items, self._shared
+            for entry in todo:
+                index, plan = entries[entry]
+                value = item_value(plan, answers, starts[entry], context)
+                if isinstance(value, FocasError):
+                    stale.add(entry)
                 else:
-                    value = item_value(plan, answers, offset, context)
-                    results[index] = value
-                    cell[0] = None if isinstance(value, FocasError) else (key, value)
-                offset += count
-        return results
+                    stale.discard(entry)
+                    # Another batch with this item (a poller's tick shapes overlap) may hold an equal value:
+                    # hand back that object, so "unchanged" stays an identity check across shapes too.
+                    known = shared.get(id(plan))
+                    if known is not None and known[0] is plan and known[1] == value:
+                        value = known[1]
+                    else:
+                        shared[id(plan)] = (plan, value)
+                values[index] = value
+        return values.copy()
 
     async def _write_macro(self, number: int, value: float) -> None:
         """cmd 0x16 with an exact decimal; cmd 0xa8 (IEEE double) only when no i32 mantissa can carry it."""
@@ -289,7 +301,7 @@ class FocasClient(CncSession):
             plan = plan_item(item, self.context, self.path)
             if len(self._plans) >= PLAN_CACHE_SIZE:
                 self._plans.clear()
-                self._cells.clear()  # their requests and plans are not asked again
+                self._shared.clear()
             self._plans[key] = plan
         return plan
 
@@ -306,7 +318,6 @@ class FocasClient(CncSession):
             prepared = self._build_batch(items)
             if len(self._prepared) >= PREPARED_CACHE_SIZE:
                 self._prepared.clear()
-                self._cells.clear()
             self._prepared[id(items)] = prepared
         return prepared
 
@@ -315,18 +326,16 @@ class FocasClient(CncSession):
         pdus = []
         for group in self._groups(plans):
             requests = [req for _, plan in group for req in plan.requests]
-            pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests),
-                                    tuple((req.cls, req.path, req.command) for req in requests), tuple(group),
-                                    [self._cell(req) for req in requests]))
-        return PreparedBatch(items, self.context, tuple(pdus), [self._cell(plan) for plan in plans])
-
-    def _cell(self, owner: object) -> list[Any]:
-        found = self._cells.get(id(owner))
-        if found is None or found[0] is not owner:
-            if len(self._cells) >= CELL_CACHE_SIZE:  # one-off lists of items (CLI, writes) never repeat
-                self._cells.clear()
-            found = self._cells[id(owner)] = (owner, [None])
-        return found[1]
+            starts: list[int] = []
+            owners: list[int] = []
+            for entry, (_, plan) in enumerate(group):
+                starts.append(len(owners))
+                owners += [entry] * len(plan.calls)
+            pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests), tuple(group),
+                                    tuple(starts), tuple(owners),
+                                    AnswerSplitter([(req.cls, req.path, req.command) for req in requests]),
+                                    set(range(len(group)))))
+        return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))
 
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
         """Items in order, packed into PDUs of at most max_subpackets subpackets."""
@@ -359,14 +368,6 @@ class FocasClient(CncSession):
                                     f"{req.path} command 0x{req.command:04x}, got class {sub.cls} path "
                                     f"{sub.path} command 0x{sub.command:04x}")
         return answers
-
-    async def _exchange_prepared(self, pdu: PreparedPdu) -> list[Answer]:
-        """One prepared 0x2101 out, its (rc, detail, payload) answers back; count and echoes checked."""
-        frame = await self._roundtrip(pdu.data, PduType.DATA_RESPONSE, "data request")
-        try:
-            return split_response(frame.body, pdu.echoes, pdu.memo)
-        except ProtocolError as exc:
-            raise ProtocolError(f"{self.describe()}: {exc}") from None
 
     async def _roundtrip(self, data: bytes, expected: PduType, what: str) -> Frame:
         stream = self._stream

@@ -20,6 +20,8 @@ import enum
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from itertools import compress, pairwise
+from operator import ne
 
 from edge.focas.errors import ProtocolError
 
@@ -190,63 +192,108 @@ Answer = tuple[int, int, bytes]  # one response subpacket reduced to (rc, detail
 Echo = tuple[int, int, int]  # what a response subpacket must echo: (class, path, command)
 
 
-# Per subpacket, a one-slot cell: its bytes in the last answer and its Answer (None before the first).
-# Cells, not values, so that PDUs carrying the same request can share what was last seen for it.
-MemoCell = list[tuple[bytes, Answer] | None]
-AnswerMemo = Sequence[MemoCell]
-
-
-def split_response(body: bytes, echoes: Sequence[Echo], memo: AnswerMemo | None = None) -> list[Answer]:
+def split_response(body: bytes, echoes: Sequence[Echo]) -> list[Answer]:
     """The answers in a 0x2102 body to requests the caller knows: one (rc, detail, payload) per request.
 
-    The client's hot path (one call per poll tick): the same checks as decode_response_body plus the
-    count and every echo against `echoes`, in one pass and without building subpacket objects.
-
-    `memo` (one cell per echo, kept by the caller between answers; a cell belongs to one request
-    subpacket): a subpacket whose bytes are those last seen for its request is not parsed again; its
-    previous Answer, the same tuple object, is returned (it passed every check then, against the same
-    echo). Most subpackets of a poll repeat; the caller can tell "unchanged" by identity.
+    The same checks as decode_response_body plus the count and every echo against `echoes`, in one pass
+    and without building subpacket objects.
     """
     size = len(body)
-    if size < 2:
-        raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {size}-byte body")
-    (count,) = U16_LAYOUT.unpack_from(body, 0)
-    if count != len(echoes):
-        raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
+    count = _answer_count(body, echoes)
     answers: list[Answer] = []
     offset = 2
-    unpack = RESPONSE_SUB_LAYOUT.unpack_from
-    startswith = body.startswith
     for index, echo in enumerate(echoes):
-        if memo is not None:
-            known = memo[index][0]
-            if known is not None and startswith(known[0], offset):
-                answers.append(known[1])
-                offset += len(known[0])
-                continue
         if offset + RESPONSE_SUBPACKET_FIXED > size:
             raise ProtocolError(f"data response: count says {count} subpackets but the body ends after "
                                 f"{index} (at byte {offset} of {size})")
-        length, cls, path, command, rc, detail, _pad, payload_size = unpack(body, offset)
-        if length < RESPONSE_SUBPACKET_FIXED or offset + length > size:
-            raise ProtocolError(f"data response: subpacket {index} declares {length} bytes at offset {offset} "
-                                f"but only {size - offset} remain (minimum {RESPONSE_SUBPACKET_FIXED})")
-        if payload_size != length - RESPONSE_SUBPACKET_FIXED:
-            raise ProtocolError(f"data response: subpacket {index} (command 0x{command:04x}) announces a "
-                                f"{payload_size}-byte payload but its length {length} leaves room for "
-                                f"{length - RESPONSE_SUBPACKET_FIXED}")
-        if (cls, path, command) != echo:
-            raise ProtocolError(f"subpacket {index} should echo class {echo[0]} path {echo[1]} command "
-                                f"0x{echo[2]:04x}, got class {cls} path {path} command 0x{command:04x}")
-        answer = (rc, detail, body[offset + RESPONSE_SUBPACKET_FIXED : offset + length])
+        answer, length = _one_answer(body, offset, index, echo)
         answers.append(answer)
-        if memo is not None:
-            memo[index][0] = (body[offset : offset + length], answer)
         offset += length
     if offset != size:
         raise ProtocolError(f"data response: {size - offset} bytes left after the {count} subpackets the "
                             f"count announced")
     return answers
+
+
+def _answer_count(body: bytes, echoes: Sequence[Echo]) -> int:
+    if len(body) < 2:
+        raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {len(body)}-byte body")
+    (count,) = U16_LAYOUT.unpack_from(body, 0)
+    if count != len(echoes):
+        raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
+    return int(count)
+
+
+def _one_answer(body: bytes, offset: int, index: int, echo: Echo) -> tuple[Answer, int]:
+    """The subpacket at `offset` (its fixed part known to be in the body), checked; and its length."""
+    length, cls, path, command, rc, detail, _pad, payload_size = RESPONSE_SUB_LAYOUT.unpack_from(body, offset)
+    size = len(body)
+    if length < RESPONSE_SUBPACKET_FIXED or offset + length > size:
+        raise ProtocolError(f"data response: subpacket {index} declares {length} bytes at offset {offset} "
+                            f"but only {size - offset} remain (minimum {RESPONSE_SUBPACKET_FIXED})")
+    if payload_size != length - RESPONSE_SUBPACKET_FIXED:
+        raise ProtocolError(f"data response: subpacket {index} (command 0x{command:04x}) announces a "
+                            f"{payload_size}-byte payload but its length {length} leaves room for "
+                            f"{length - RESPONSE_SUBPACKET_FIXED}")
+    if (cls, path, command) != echo:
+        raise ProtocolError(f"subpacket {index} should echo class {echo[0]} path {echo[1]} command "
+                            f"0x{echo[2]:04x}, got class {cls} path {path} command 0x{command:04x}")
+    return (rc, detail, body[offset + RESPONSE_SUBPACKET_FIXED : offset + length]), length
+
+
+class AnswerSplitter:
+    """split_response for the answers to ONE repeated request PDU (a poll tick), remembering the last.
+
+    Most subpackets of a poll answer repeat byte for byte, at the same offsets. While the body keeps its
+    size and count, it is cut at the last answer's subpacket boundaries and the pieces compared with the
+    last ones, both in C; only a piece that differs is parsed (and checked) again, and an unchanged one
+    gives back its previous Answer, the same object. A changed piece whose length moved, or a body of
+    another size, is split from scratch. `split` also says which subpackets moved (None: all of them).
+    """
+
+    def __init__(self, echoes: Sequence[Echo]) -> None:
+        self.echoes = tuple(echoes)
+        self._size = -1  # no answer yet
+        self._head = b""
+        self._offsets: tuple[int, ...] = ()
+        self._slices: tuple[slice, ...] = ()
+        self._pieces: list[bytes] = []
+        self._answers: list[Answer] = []
+        self._indices = range(len(self.echoes))
+
+    def split(self, body: bytes) -> tuple[list[Answer], list[int] | None]:
+        """The answers (a list the caller may keep, not change) and the indices that moved."""
+        if len(body) == self._size and body.startswith(self._head):
+            pieces = list(map(body.__getitem__, self._slices))
+            moved = list(compress(self._indices, map(ne, pieces, self._pieces)))
+            if not moved:
+                return self._answers, moved
+            answers = self._answers.copy()
+            offsets = self._offsets
+            for index in moved:
+                answer, length = _one_answer(body, offsets[index], index, self.echoes[index])
+                if length != len(pieces[index]):
+                    break  # the layout moved: split from scratch
+                answers[index] = answer
+            else:
+                self._pieces, self._answers = pieces, answers
+                return answers, moved
+        return self._split_anew(body), None
+
+    def _split_anew(self, body: bytes) -> list[Answer]:
+        self._size = -1  # until this answer is known good
+        answers = split_response(body, self.echoes)
+        offsets, offset = [], 2
+        for _rc, _detail, payload in answers:
+            offsets.append(offset)
+            offset += RESPONSE_SUBPACKET_FIXED + len(payload)
+        bounds = [*offsets, offset]
+        self._slices = tuple(slice(a, b) for a, b in pairwise(bounds))
+        self._offsets = tuple(offsets)
+        self._pieces = list(map(body.__getitem__, self._slices))
+        self._answers = answers
+        self._head, self._size = body[:2], len(body)
+        return answers
 
 
 # ---- whole PDUs -----------------------------------------------------------------------------------------

@@ -171,8 +171,12 @@ class CncSession(abc.ABC):
         """One result per item, in order: its value, or the FocasError that item alone raised."""
         if not self._connected:
             raise ConnectionLost(f"{self.describe()}: not connected")
-        async with self._io_lock:
+        lock = self._io_lock  # `async with`, without its two extra coroutines (a poller calls this per tick)
+        await lock.acquire()
+        try:
             return await self._guarded(self._batch(items))
+        finally:
+            lock.release()
 
     async def read(self, item: it.ReadItem) -> Any:
         """One item; its error is raised."""

@@ -63,7 +63,18 @@ def decode_scaled(data: bytes, offset: int = 0, *, strict: bool = True) -> Scale
 def decode_scaled_list(payload: bytes, *, strict: bool = True) -> list[ScaledValue]:
     if len(payload) % SCALED_SIZE:
         raise ProtocolError(f"expected a multiple of 8 bytes of scaled values, got {len(payload)}")
-    return [decode_scaled(payload, i, strict=strict) for i in range(0, len(payload), SCALED_SIZE)]
+    # The common shapes (no scaling; a positive power of ten) decoded inline, all at one unpack: a poll
+    # tick decodes every axis position this way. Anything else goes through decode_scaled and its checks.
+    values: list[ScaledValue] = []
+    append = values.append
+    for index, (mantissa, _zero, base, exponent) in enumerate(SCALED_LAYOUT.iter_unpack(payload)):
+        if exponent == 0:
+            append(float(mantissa))
+        elif base == 10 and 0 < exponent <= MAX_EXPONENT:
+            append(mantissa / 10**exponent)
+        else:
+            append(decode_scaled(payload, index * SCALED_SIZE, strict=strict))
+    return values
 
 
 def encode_scaled(value: float | None, exponent: int | None = None) -> bytes:

@@ -380,8 +380,9 @@ async def test_a_repeated_batch_reuses_its_request_and_unchanged_values(cnc: Scr
 
 
 async def test_batches_sharing_an_item_share_what_was_last_answered(cnc: ScriptedCnc) -> None:
-    """A poller's tick shapes (status only; status + macros) overlap: the memo is per request and item,
-    not per batch, so an unchanged item keeps its value object from one shape to the other."""
+    """A poller's tick shapes (status only; status + macros) overlap: a value decoded in one shape that
+    equals the item's value from the other is handed back as that object, so an unchanged item keeps
+    its value object from one shape to the other."""
     feed = it.ReadFeed()
     small, large = (feed, it.ReadClock()), (it.ReadMacros(500, 501), feed, it.ReadClock())
     async with client_for(cnc) as client:

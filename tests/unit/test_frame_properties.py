@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from edge.focas.errors import ProtocolError
 from edge.focas.frame import (
+    AnswerSplitter,
     FrameDecoder,
     RequestSubpacket,
     ResponseSubpacket,
@@ -165,29 +166,54 @@ def test_property_split_response_rejects_a_truncated_body(subs: list[ResponseSub
 
 
 @given(st.lists(st.tuples(u16, u16, u16), min_size=1, max_size=5), st.data())
-def test_property_split_response_with_memo_answers_as_without(echoes: list[tuple[int, int, int]],
-                                                              data: st.DataObject) -> None:
-    """A run of answers (some repeating subpackets, some changed, some malformed) to one request: with
-    the memo the result, or the error, is the one a fresh split gives, and an unchanged subpacket comes
-    back as the very same Answer object."""
-    memo: list[Any] = [[None] for _ in echoes]
+def test_property_answer_splitter_answers_as_a_fresh_split(echoes: list[tuple[int, int, int]],
+                                                           data: st.DataObject) -> None:
+    """A run of answers to one request (some subpackets repeating, some changed in content or length,
+    some bodies malformed): the splitter gives what a fresh split gives, or the same error; an unchanged
+    subpacket comes back as the very same Answer object, and `moved` names exactly the ones that are not."""
+    splitter = AnswerSplitter(echoes)
     previous: list[tuple[int, int, bytes]] | None = None
     payloads = st.sampled_from([b"", b"\x00\x01", b"\x00\x02", b"\x00\x01\x00\x00"])
-    for _ in range(data.draw(st.integers(1, 6))):
+    for _ in range(data.draw(st.integers(1, 8))):
         subs = [ResponseSubpacket(cls, command, data.draw(st.sampled_from([0, 0, 5])), 0, data.draw(payloads),
                                   path) for cls, path, command in echoes]
         body = encode_response(subs)[10:]
-        body = data.draw(st.sampled_from([body, body, body[:-1], body + b"\x00"]))
+        body = data.draw(st.sampled_from([body, body, body, body[:-1], body + b"\x00"]))
         try:
             expected = split_response(body, echoes)
         except ProtocolError as exc:
             with pytest.raises(ProtocolError, match=str(exc)[:20].replace("(", ".").replace(")", ".")):
-                split_response(body, echoes, memo)
-            previous = None  # the memo may hold part of the failed answer
-            continue
-        got = split_response(body, echoes, memo)
+                splitter.split(body)
+            continue  # the splitter still compares with the last good answer
+        got, moved = splitter.split(body)
         assert got == expected
-        if previous is not None:
-            for old, new in zip(previous, got, strict=True):
-                assert old is new or old != new  # an unchanged subpacket: the same Answer object
-        previous = got
+        if previous is None:
+            assert moved is None
+        elif moved is not None:
+            assert moved == [i for i, (old, new) in enumerate(zip(previous, got, strict=True)) if old != new]
+            assert all(old is new for i, (old, new) in enumerate(zip(previous, got, strict=True))
+                       if i not in moved)
+        previous = list(got)
+
+
+def test_answer_splitter_reparses_only_what_moved_and_notices_a_length_change() -> None:
+    echoes = [(1, 1, 0x19), (1, 1, 0x24), (1, 1, 0x26)]
+
+    def body(*payloads: bytes) -> bytes:
+        return encode_response([ResponseSubpacket(c, cmd, 0, 0, p, path)
+                                for (c, path, cmd), p in zip(echoes, payloads, strict=True)])[10:]
+
+    splitter = AnswerSplitter(echoes)
+    first, moved = splitter.split(body(b"\x00\x01", b"\x00\x02", b"\x00\x03"))
+    assert moved is None
+    second, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
+    assert moved == [1] and second[0] is first[0] and second[2] is first[2] and second[1][2] == b"\x00\x09"
+    third, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
+    assert moved == [] and third is second
+    # Same total size, but the first two subpackets trade two bytes: the layout moved, split anew.
+    fourth, moved = splitter.split(body(b"", b"\x00\x09\x00\x00", b"\x00\x03"))
+    assert moved is None and [a[2] for a in fourth] == [b"", b"\x00\x09\x00\x00", b"\x00\x03"]
+    with pytest.raises(ProtocolError, match="should echo"):
+        splitter.split(encode_response([ResponseSubpacket(1, 0x99, 0, 0, b"", 1),
+                                        *[ResponseSubpacket(c, cmd, 0, 0, p, path) for (c, path, cmd), p
+                                          in zip(echoes[1:], (b"\x00\x09\x00\x00", b"\x00\x03"), strict=True)]])[10:])

@@ -14,6 +14,7 @@ from edge.focas.errors import ProtocolError
 from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.values import (
     NO_VALUE,
+    SCALED_LAYOUT,
     SlotForm,
     decode_pmc,
     decode_records,
@@ -213,3 +214,22 @@ def test_plain_decimal_shortcut_gives_the_decimal_encoding(value: float) -> None
     quick = values_module._plain_decimal(value)
     if quick is not None:
         assert quick == values_module._encode_decimal(value, None)
+
+
+scaled_chunks = st.one_of(
+    st.tuples(st.integers(-2**31, 2**31 - 1), st.integers(0, 255), st.sampled_from([0, 1, 2, 10, 16, 255]),
+              st.sampled_from([-1, 0, 1, 3, 4, 9, 64, 65, -3, -64, -65, 300])).map(lambda t: SCALED_LAYOUT.pack(*t)),
+    st.binary(min_size=8, max_size=8))
+
+
+@given(st.lists(scaled_chunks, max_size=12), st.booleans())
+def test_property_a_list_decodes_as_its_values_one_by_one(chunks: list[bytes], strict: bool) -> None:
+    payload = b"".join(chunks)
+    try:
+        expected = [decode_scaled(payload, i * 8, strict=strict) for i in range(len(chunks))]
+    except ProtocolError as exc:
+        with pytest.raises(ProtocolError, match=str(exc)[:30].replace("±", ".").replace("(", ".")):
+            decode_scaled_list(payload, strict=strict)
+        return
+    got = decode_scaled_list(payload, strict=strict)
+    assert [repr(v) for v in got] == [repr(v) for v in expected]  # same floats, bit for bit (and NaN-free)
