@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import NamedTuple
 
 
 class MetricType(enum.Enum):
@@ -39,9 +40,13 @@ class Quality(enum.IntEnum):
     STALE = 500
 
 
-@dataclass(frozen=True, slots=True)
-class Sample:
-    """One metric value with the time the CNC reported it (epoch milliseconds, UTC)."""
+class Sample(NamedTuple):
+    """One metric value with the time the CNC reported it (epoch milliseconds, UTC).
+
+    Immutable. A NamedTuple rather than a frozen dataclass: a poll tick builds one per changed value,
+    and a frozen dataclass's __init__ (one object.__setattr__ per field) costs three times as much.
+    Change a field with `sample._replace(...)`.
+    """
 
     name: str
     value: object

@@ -9,6 +9,7 @@ the unconfirmed batches move to the disk spool, to be replayed (as historical) a
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -43,7 +44,7 @@ class Outbox:
     """Live batches sent without acknowledgement, in send order, until a barrier confirms them."""
 
     def __init__(self) -> None:
-        self._entries: list[tuple[int, HeldBatch]] = []
+        self._entries: deque[tuple[int, HeldBatch]] = deque()  # ascending positions: confirm pops the front
         self._next = 0
 
     def __len__(self) -> int:
@@ -59,12 +60,14 @@ class Outbox:
 
     def confirm(self, mark: int) -> int:
         """Forget the batches recorded before `mark` (they reached the broker); how many went."""
-        keep = [e for e in self._entries if e[0] >= mark]
-        gone = len(self._entries) - len(keep)
-        self._entries = keep
+        entries = self._entries
+        gone = 0
+        while entries and entries[0][0] < mark:
+            entries.popleft()
+            gone += 1
         return gone
 
     def take_all(self) -> list[HeldBatch]:
         """Every unconfirmed batch, oldest first, leaving the outbox empty (the connection is suspect)."""
-        entries, self._entries = self._entries, []
+        entries, self._entries = self._entries, deque()
         return [batch for _, batch in entries]

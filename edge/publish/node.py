@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from operator import attrgetter
 
 from edge.publish import ddata as dd
@@ -312,7 +312,7 @@ class SparkplugNode:
         known = self._known(device_id, dev, samples)
         if not known:
             return []
-        marked = [s if s.historical else replace(s, historical=True) for s in known]
+        marked = [s if s.historical else s._replace(historical=True) for s in known]
         return [self._data(dev.data_topic, dev, marked,
                            track_quality=False)]
 
