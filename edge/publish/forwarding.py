@@ -9,7 +9,7 @@ the unconfirmed batches move to the disk spool, to be replayed (as historical) a
 
 from __future__ import annotations
 
-from collections import deque
+from bisect import bisect_left
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -44,7 +44,7 @@ class Outbox:
     """Live batches sent without acknowledgement, in send order, until a barrier confirms them."""
 
     def __init__(self) -> None:
-        self._entries: deque[tuple[int, HeldBatch]] = deque()  # ascending positions: confirm pops the front
+        self._entries: list[tuple[int, HeldBatch]] = []  # ascending positions: confirm cuts a prefix
         self._next = 0
 
     def __len__(self) -> int:
@@ -60,14 +60,15 @@ class Outbox:
 
     def confirm(self, mark: int) -> int:
         """Forget the batches recorded before `mark` (they reached the broker); how many went."""
-        entries = self._entries
-        gone = 0
-        while entries and entries[0][0] < mark:
-            entries.popleft()
-            gone += 1
+        gone = bisect_left(self._entries, mark, key=_position)  # a barrier a second: O(log n), then memmove
+        del self._entries[:gone]
         return gone
 
     def take_all(self) -> list[HeldBatch]:
         """Every unconfirmed batch, oldest first, leaving the outbox empty (the connection is suspect)."""
-        entries, self._entries = self._entries, deque()
+        entries, self._entries = self._entries, []
         return [batch for _, batch in entries]
+
+
+def _position(entry: tuple[int, HeldBatch]) -> int:
+    return entry[0]
