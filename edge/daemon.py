@@ -21,6 +21,7 @@ from edge.collect.poller import MachinePoller, SessionFactory, default_session
 from edge.collect.tickgrid import TickGrid
 from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
+from edge.gc_tuning import tune_collector
 from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.spool import open_spool
@@ -292,6 +293,7 @@ def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = N
         daemon = Daemon(config, config_path)
         if configure is not None:
             configure(daemon)
+        tune_collector()
         return await daemon.run()
 
     return asyncio.run(main())
