@@ -21,7 +21,7 @@ import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import compress, pairwise
-from operator import ne
+from operator import not_
 
 from edge.focas.errors import ProtocolError
 
@@ -245,8 +245,8 @@ class AnswerSplitter:
     """split_response for the answers to ONE repeated request PDU (a poll tick), remembering the last.
 
     Most subpackets of a poll answer repeat byte for byte, at the same offsets. While the body keeps its
-    size and count, it is cut at the last answer's subpacket boundaries and the pieces compared with the
-    last ones, both in C; only a piece that differs is parsed (and checked) again, and an unchanged one
+    size and count, each of the last answer's subpackets is compared in place with the bytes at its
+    offset, in C; only a subpacket that differs is parsed (and checked) again, and an unchanged one
     gives back its previous Answer, the same object. A changed piece whose length moved, or a body of
     another size, is split from scratch. `split` also says which subpackets moved (None: all of them).
     """
@@ -256,7 +256,6 @@ class AnswerSplitter:
         self._size = -1  # no answer yet
         self._head = b""
         self._offsets: tuple[int, ...] = ()
-        self._slices: tuple[slice, ...] = ()
         self._pieces: list[bytes] = []
         self._answers: list[Answer] = []
         self._indices = range(len(self.echoes))
@@ -264,17 +263,19 @@ class AnswerSplitter:
     def split(self, body: bytes) -> tuple[list[Answer], list[int] | None]:
         """The answers (a list the caller may keep, not change) and the indices that moved."""
         if len(body) == self._size and body.startswith(self._head):
-            pieces = list(map(body.__getitem__, self._slices))
-            moved = list(compress(self._indices, map(ne, pieces, self._pieces)))
+            offsets = self._offsets
+            # Each last piece compared in place (no slicing): which subpackets are not what they were.
+            moved = list(compress(self._indices, map(not_, map(body.startswith, self._pieces, offsets))))
             if not moved:
                 return self._answers, moved
             answers = self._answers.copy()
-            offsets = self._offsets
+            pieces = self._pieces.copy()
             for index in moved:
                 answer, length = _one_answer(body, offsets[index], index, self.echoes[index])
                 if length != len(pieces[index]):
                     break  # the layout moved: split from scratch
                 answers[index] = answer
+                pieces[index] = body[offsets[index] : offsets[index] + length]
             else:
                 self._pieces, self._answers = pieces, answers
                 return answers, moved
@@ -288,9 +289,8 @@ class AnswerSplitter:
             offsets.append(offset)
             offset += RESPONSE_SUBPACKET_FIXED + len(payload)
         bounds = [*offsets, offset]
-        self._slices = tuple(slice(a, b) for a, b in pairwise(bounds))
         self._offsets = tuple(offsets)
-        self._pieces = list(map(body.__getitem__, self._slices))
+        self._pieces = [body[a:b] for a, b in pairwise(bounds)]
         self._answers = answers
         self._head, self._size = body[:2], len(body)
         return answers
