@@ -83,6 +83,7 @@ def _parse_duration(value: object) -> object:
 
 Duration = Annotated[float, BeforeValidator(_parse_duration), Field(gt=0)]
 Period = Annotated[float, BeforeValidator(_parse_duration), Field(ge=0.05)]
+DEFAULT_POLL_GRID_S = 0.025  # a quarter of a 100 ms poll period
 
 
 def check_sparkplug_id(value: str) -> str:
@@ -655,6 +656,9 @@ class Config(_Model):
     state_dir: Path | None = None
     http: HttpConfig = Field(default_factory=HttpConfig)
     spool: SpoolConfig = Field(default_factory=SpoolConfig)
+    # Poll wake-ups are rounded up to this grid, so the machines due in one slot share one event-loop turn
+    # (docs/performance.md): a poll is at most this much later than due, never earlier, never skipped.
+    poll_grid_s: Annotated[float, BeforeValidator(_parse_duration), Field(gt=0, le=0.1)] = DEFAULT_POLL_GRID_S
 
     _warnings: list[str] = PrivateAttr(default_factory=list)
     _state_dir: Path = PrivateAttr(default=DEFAULT_STATE_DIR)
@@ -665,6 +669,16 @@ class Config(_Model):
         for problem in _duplicate_ids({"machines": [{"id": m.id} for m in machines]}):
             raise ValueError("@" + problem.removeprefix("machines").replace(": ", "@", 1))
         return machines
+
+    @model_validator(mode="after")
+    def _grid_fits_every_period(self) -> Config:
+        for machine in self.machines:
+            periods = machine.poll.periods
+            fastest = min(periods.status, periods.macros, periods.pmc, periods.params, periods.diags)
+            if self.poll_grid_s > fastest / 2:
+                raise ValueError(f"poll_grid_s {self.poll_grid_s:g}s is more than half of machine {machine.id!r}'s "
+                                 f"fastest poll period ({fastest:g}s): lower poll_grid_s to {fastest / 2:g}s or less")
+        return self
 
     @property
     def warnings(self) -> list[str]:

@@ -2,9 +2,10 @@
 
 Every machine waking on its own timer costs the event loop one timer and one turn (one epoll wait) per
 tick: at 100 machines x 10 Hz that is a thousand turns a second, most of them for a single machine.
-Rounding each wake-up up to the next grid point (10 ms by default) lets the machines due in the same
-slot share one timer and one loop turn, while a fleet still spreads over the slots of a period (their
-start phases are jittered), so the CNCs and the broker never see the whole fleet in lock-step.
+Rounding each wake-up up to the next grid point (the config's `poll_grid_s`, 25 ms by default) lets the
+machines due in the same slot share one timer and one loop turn, while a fleet still spreads over the
+slots of a period (their start phases are jittered), so the CNCs and the broker never see the whole fleet
+in lock-step. A coarser grid is cheaper per machine-cycle and adds latency (docs/performance.md).
 
 A wake-up is never early: at most one grid step late, and the schedule keeps its own phase (the next due
 time is computed from the due time, not from the wake-up), so a machine stays in its slot.
@@ -15,7 +16,9 @@ from __future__ import annotations
 import asyncio
 import math
 
-DEFAULT_STEP_S = 0.010
+from edge.config import DEFAULT_POLL_GRID_S
+
+DEFAULT_STEP_S = DEFAULT_POLL_GRID_S
 
 
 class TickGrid:

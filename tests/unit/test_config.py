@@ -397,3 +397,23 @@ def test_arbitrary_documents_only_raise_config_error(document: dict[str, object]
 def test_arbitrary_text_only_raises_config_error(text: str) -> None:
     with contextlib.suppress(ConfigError):
         parse_config(text, "fuzz.yaml", {})
+
+
+def test_poll_grid_defaults_to_25_ms_and_takes_a_duration() -> None:
+    assert parse(MINIMAL).poll_grid_s == 0.025
+    assert parse(MINIMAL + "poll_grid_s: 50ms\n").poll_grid_s == 0.05
+
+
+@pytest.mark.parametrize("grid,message", [
+    ("0", "greater than 0"),
+    ("200ms", "less than or equal to 0.1"),
+])
+def test_poll_grid_out_of_range_is_refused(grid: str, message: str) -> None:
+    problems = problems_of(MINIMAL + f"poll_grid_s: {grid}\n")
+    assert any("poll_grid_s" in p and message in p for p in problems), problems
+
+
+def test_poll_grid_coarser_than_half_a_period_is_refused_naming_the_machine() -> None:
+    text = MINIMAL + "    poll: {periods: {status: 80ms}}\npoll_grid_s: 50ms\n"
+    problems = problems_of(text)
+    assert any("poll_grid_s 0.05s is more than half of machine 'm1'" in p and "0.04s" in p for p in problems), problems
