@@ -17,7 +17,7 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import cast
+from typing import Any, cast
 
 from edge.focas import functions as fn
 from edge.focas import items as it
@@ -43,7 +43,7 @@ from edge.focas.frame import (
 )
 from edge.focas.functions import Context, Function
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, item_value, plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -123,6 +123,9 @@ class FrameStream(asyncio.Protocol):
                 await asyncio.shield(self._lost)
 
 
+SingleCall = tuple[Any, RequestSubpacket, str]  # (payload decoder, its request, the function's name)
+
+
 @dataclass(frozen=True, slots=True)
 class PreparedPdu:
     """One request PDU of a batch, encoded, with the items it serves and what it last got back."""
@@ -131,6 +134,7 @@ class PreparedPdu:
     requests: tuple[RequestSubpacket, ...]
     items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
     starts: tuple[int, ...]  # per entry of `items`, the index of its first answer subpacket
+    single: tuple[SingleCall | None, ...]  # per entry: its one call, when that call's value is the item's
     owners: tuple[int, ...]  # per request subpacket, the entry of `items` it serves
     splitter: AnswerSplitter  # the last answer, to find the subpackets that moved
     stale: set[int]  # entries of `items` to decode on the next answer whatever moved (new, or an error)
@@ -237,10 +241,22 @@ class FocasClient(CncSession):
                 todo = stale.union([owners[i] for i in moved])
             else:
                 continue
-            starts, entries, shared = pdu.starts, pdu.items, self._shared
+            starts, entries, single, shared = pdu.starts, pdu.items, pdu.single, self._shared
             for entry in todo:
                 index, plan = entries[entry]
-                value = item_value(plan, answers, starts[entry], context)
+                call = single[entry]
+                if call is None:
+                    value = item_value(plan, answers, starts[entry], context)
+                else:  # item_value's work for the common item, inline: one call whose value is the item's
+                    rc, detail, payload = answers[starts[entry]]
+                    decode, request, name = call
+                    if rc != 0:
+                        value = cnc_error(rc, name, detail)
+                    else:
+                        try:
+                            value = decode(payload, request, context)
+                        except FocasError as exc:
+                            value = exc
                 if isinstance(value, FocasError):
                     stale.add(entry)
                 else:
@@ -331,8 +347,11 @@ class FocasClient(CncSession):
             for entry, (_, plan) in enumerate(group):
                 starts.append(len(owners))
                 owners += [entry] * len(plan.calls)
+            single = tuple((plan.calls[0][0].decode_payload, plan.calls[0][1], plan.calls[0][0].name)
+                           if plan.error is None and len(plan.calls) == 1 and plan.combine is first_value else None
+                           for _, plan in group)
             pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests), tuple(group),
-                                    tuple(starts), tuple(owners),
+                                    tuple(starts), single, tuple(owners),
                                     AnswerSplitter([(req.cls, req.path, req.command) for req in requests]),
                                     set(range(len(group)))))
         return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))

@@ -22,7 +22,8 @@ from edge.focas.values import SlotForm
 Combiner = Callable[[list[Any]], Any]
 
 
-def _first(values: list[Any]) -> Any:
+def first_value(values: list[Any]) -> Any:
+    """The combiner of a one-call item: that call's value (the client inlines this case)."""
     return values[0]
 
 
@@ -38,7 +39,7 @@ class ItemPlan:
 
     item: it.ReadItem
     calls: tuple[tuple[Function, RequestSubpacket], ...] = ()
-    combine: Combiner = _first
+    combine: Combiner = first_value
     error: FocasError | None = None
 
     @property

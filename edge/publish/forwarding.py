@@ -12,6 +12,7 @@ from __future__ import annotations
 from bisect import bisect_left
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from edge.samples import Sample
 
@@ -31,9 +32,9 @@ class ForwardingPolicy:
             raise ValueError(f"forwarding policy: expected positive intervals, rate and batch, got {self}")
 
 
-@dataclass(frozen=True, slots=True)
-class HeldBatch:
-    """What the publisher hands the spool: one device's samples of one kind for one format."""
+class HeldBatch(NamedTuple):
+    """What the publisher hands the spool: one device's samples of one kind for one format. Immutable;
+    one per live DATA message, so a NamedTuple (a frozen dataclass's __init__ costs twice as much)."""
 
     device_id: str
     kind: str  # "data" | "events"
