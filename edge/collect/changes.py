@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 
-from edge.samples import MetricType, Quality, Sample
+from edge.samples import MetricType, Quality, Sample, new_sample
 
 
 class ChangeDetector:
@@ -61,7 +61,7 @@ class ChangeDetector:
                     return None
             elif not values_differ(old, value, band):
                 return None
-        sample = Sample(name, value, kind, timestamp_ms, quality)
+        sample = new_sample(name, value, kind, timestamp_ms, quality)
         self._reported[name] = sample
         return sample
 

@@ -420,22 +420,21 @@ class MachinePoller:
         if result is self._clock_reading:
             if not self.clock.narrows(self._clock_epoch, mid_mono, half_rtt):
                 return False
-            self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
         elif isinstance(result, datetime):
             self._clock_reading, self._clock_epoch = result, cnc_to_utc_seconds(result, self.clock.zone)
-            self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
-        if isinstance(result, datetime):
-            using_gateway = self.clock.use_gateway_time
-            if using_gateway != self._clock_mode_logged:
-                if using_gateway:
-                    log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
-                else:
-                    log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
-                self._clock_mode_logged = using_gateway
         else:
             self._clock_reading = _NOTHING
             if isinstance(result, FocasError):
                 self.stats.count_error(result)
+            return True
+        self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
+        using_gateway = self.clock.use_gateway_time
+        if using_gateway != self._clock_mode_logged:
+            if using_gateway:
+                log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
+            else:
+                log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
+            self._clock_mode_logged = using_gateway
         return True
 
     def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:

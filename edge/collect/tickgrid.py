@@ -18,13 +18,11 @@ import math
 
 from edge.config import DEFAULT_POLL_GRID_S
 
-DEFAULT_STEP_S = DEFAULT_POLL_GRID_S
-
 
 class TickGrid:
     """Shared by the pollers of one event loop: `await grid.sleep_until(monotonic_deadline)`."""
 
-    def __init__(self, step_s: float = DEFAULT_STEP_S) -> None:
+    def __init__(self, step_s: float = DEFAULT_POLL_GRID_S) -> None:
         if not step_s > 0:
             raise ValueError(f"tick grid step must be > 0 s, got {step_s}")
         self.step_s = step_s

@@ -17,7 +17,7 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import Any, cast
+from typing import cast
 
 from edge.focas import functions as fn
 from edge.focas import items as it
@@ -41,9 +41,9 @@ from edge.focas.frame import (
     encode_open_request,
     encode_request,
 )
-from edge.focas.functions import Context, Function
+from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, call_value, first_value, item_value, plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -123,7 +123,7 @@ class FrameStream(asyncio.Protocol):
                 await asyncio.shield(self._lost)
 
 
-SingleCall = tuple[Any, RequestSubpacket, str]  # (payload decoder, its request, the function's name)
+SingleCall = tuple[PayloadDecoder, RequestSubpacket, str]  # (payload decoder, its request, the function's name)
 
 
 @dataclass(frozen=True, slots=True)
@@ -247,16 +247,9 @@ class FocasClient(CncSession):
                 call = single[entry]
                 if call is None:
                     value = item_value(plan, answers, starts[entry], context)
-                else:  # item_value's work for the common item, inline: one call whose value is the item's
-                    rc, detail, payload = answers[starts[entry]]
+                else:  # the common item, one call whose value is the item's: without item_value's loop
                     decode, request, name = call
-                    if rc != 0:
-                        value = cnc_error(rc, name, detail)
-                    else:
-                        try:
-                            value = decode(payload, request, context)
-                        except FocasError as exc:
-                            value = exc
+                    value = call_value(decode, name, request, answers[starts[entry]], context)
                 if isinstance(value, FocasError):
                     stale.add(entry)
                 else:

@@ -2,8 +2,8 @@
 
 `asyncio.timeout` arms one TimerHandle per request: built in Python, pushed on the loop's heap (Python
 comparisons) and later dropped from it. A fleet's pollers do that ten times a second per machine for a
-timeout of seconds that almost never fires. Here a session re-arms its one `Deadline` into a slot of
-the wheel instead: the deadline is rounded UP to the grid (never early, at most one step late), every
+timeout of seconds that almost never fires. Here each request arms a `Deadline` into a slot of the
+wheel instead: the deadline is rounded UP to the grid (never early, at most one step late), every
 deadline in a slot shares that slot's single timer, and the timer cancels the tasks still registered
 when it fires. Disarming is a set removal.
 
@@ -23,9 +23,9 @@ DEFAULT_STEP_S = 0.05
 
 
 class Deadline:
-    """One session's reusable registration: armed around each request, disarmed after it."""
+    """One request's registration: armed before it is sent, disarmed when it ends."""
 
-    __slots__ = ("__weakref__", "_slot", "_task", "expired")
+    __slots__ = ("_slot", "_task", "expired")
 
     def __init__(self) -> None:
         self._task: asyncio.Task[object] | None = None
@@ -63,6 +63,9 @@ class DeadlineWheel:
             loop.call_at(slot * self.step_s, self._fire, slot)
         members.add(deadline)
         deadline._task, deadline._slot, deadline.expired = task, slot, False
+
+    def serves(self, loop: asyncio.AbstractEventLoop) -> bool:
+        return self._loop() is loop
 
     def disarm(self, deadline: Deadline) -> None:
         slot, deadline._slot, deadline._task = deadline._slot, None, None

@@ -165,13 +165,20 @@ def _split_subpackets(body: bytes, minimum: int, what: str) -> list[bytes]:
 
 def decode_request_body(body: bytes) -> list[RequestSubpacket]:
     """The subpackets of a 0x2101 body."""
-    result = []
-    for chunk in _split_subpackets(body, REQUEST_SUBPACKET_FIXED, "data request"):
-        _, cls, path, command, *args = _REQUEST_SUB.unpack_from(chunk, 0)
-        a1, a2, a3, a4, a5 = args
-        result.append(RequestSubpacket(cls, command, (a1, a2, a3, a4, a5),
-                                       bytes(chunk[REQUEST_SUBPACKET_FIXED:]), path))
-    return result
+    return [decode_request_chunk(chunk) for chunk in request_chunks(body)]
+
+
+def request_chunks(body: bytes) -> list[bytes]:
+    """The subpacket byte strings of a 0x2101 body, each with its length word (checked as
+    decode_request_body checks them); a server keys what it compiled for a request by these bytes."""
+    return _split_subpackets(body, REQUEST_SUBPACKET_FIXED, "data request")
+
+
+def decode_request_chunk(chunk: bytes) -> RequestSubpacket:
+    """One subpacket of request_chunks."""
+    _, cls, path, command, *args = _REQUEST_SUB.unpack_from(chunk, 0)
+    a1, a2, a3, a4, a5 = args
+    return RequestSubpacket(cls, command, (a1, a2, a3, a4, a5), bytes(chunk[REQUEST_SUBPACKET_FIXED:]), path)
 
 
 def decode_response_body(body: bytes) -> list[ResponseSubpacket]:
@@ -199,7 +206,11 @@ def split_response(body: bytes, echoes: Sequence[Echo]) -> list[Answer]:
     and without building subpacket objects.
     """
     size = len(body)
-    count = _answer_count(body, echoes)
+    if size < 2:
+        raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {size}-byte body")
+    (count,) = U16_LAYOUT.unpack_from(body, 0)
+    if count != len(echoes):
+        raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
     answers: list[Answer] = []
     offset = 2
     for index, echo in enumerate(echoes):
@@ -213,15 +224,6 @@ def split_response(body: bytes, echoes: Sequence[Echo]) -> list[Answer]:
         raise ProtocolError(f"data response: {size - offset} bytes left after the {count} subpackets the "
                             f"count announced")
     return answers
-
-
-def _answer_count(body: bytes, echoes: Sequence[Echo]) -> int:
-    if len(body) < 2:
-        raise ProtocolError(f"data response: expected a 2-byte subpacket count, got a {len(body)}-byte body")
-    (count,) = U16_LAYOUT.unpack_from(body, 0)
-    if count != len(echoes):
-        raise ProtocolError(f"expected {len(echoes)} subpackets in the answer, got {count}")
-    return int(count)
 
 
 def _one_answer(body: bytes, offset: int, index: int, echo: Echo) -> tuple[Answer, int]:

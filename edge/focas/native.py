@@ -16,7 +16,7 @@ from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.errors import FocasError, NotSupported, OutOfRange, ProtocolError, cnc_error
 from edge.focas.frame import Answer, RequestSubpacket, ResponseSubpacket
-from edge.focas.functions import Context, Function
+from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.values import SlotForm
 
 Combiner = Callable[[list[Any]], Any]
@@ -150,13 +150,24 @@ def item_value(plan: ItemPlan, answers: Sequence[Answer], offset: int, ctx: Cont
     if len(answers) < offset + len(calls):
         return ProtocolError(f"{plan.item.operation}: {len(calls)} answer(s) expected at {offset}, "
                              f"{len(answers)} in the PDU")
+    values = []
+    for index, (function, req) in enumerate(calls):
+        value = call_value(function.decode_payload, function.name, req, answers[offset + index], ctx)
+        if isinstance(value, FocasError):
+            return value
+        values.append(value)
     try:
-        values = []
-        for index, (function, req) in enumerate(calls):
-            rc, detail, payload = answers[offset + index]
-            if rc != 0:
-                return cnc_error(rc, function.name, detail)
-            values.append(function.decode_payload(payload, req, ctx))
         return plan.combine(values)
+    except FocasError as exc:
+        return exc
+
+
+def call_value(decode: PayloadDecoder, name: str, req: RequestSubpacket, answer: Answer, ctx: Context) -> Any:
+    """One call's decoded value, or the FocasError of its return code or of a bad payload."""
+    rc, detail, payload = answer
+    if rc != 0:
+        return cnc_error(rc, name, detail)
+    try:
+        return decode(payload, req, ctx)
     except FocasError as exc:
         return exc

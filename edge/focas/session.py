@@ -73,7 +73,6 @@ class CncSession(abc.ABC):
         self._param_locks: dict[tuple[int, int], asyncio.Lock] = {}
         self._connected = False
         self._wheel: DeadlineWheel | None = None  # the request deadlines of the loop this session runs on
-        self._wheel_loop: asyncio.AbstractEventLoop | None = None
 
     # ---- transport hooks -------------------------------------------------------------------------
     @abc.abstractmethod
@@ -281,11 +280,9 @@ class CncSession(abc.ABC):
         task = asyncio.current_task()
         if task is None:  # pragma: no cover - always called from a task
             raise RuntimeError("CncSession requests must run in an asyncio task")
-        loop = task.get_loop()
         wheel = self._wheel
-        if wheel is None or loop is not self._wheel_loop:
-            wheel, self._wheel_loop = wheel_for(loop), loop
-            self._wheel = wheel
+        if wheel is None or not wheel.serves(task.get_loop()):
+            wheel = self._wheel = wheel_for(task.get_loop())
         deadline = Deadline()
         cancelling = task.cancelling()
         wheel.arm(deadline, task, self.timeout)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from bisect import bisect_left
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from operator import itemgetter
 
 from edge.samples import Sample
 
@@ -32,9 +32,9 @@ class ForwardingPolicy:
             raise ValueError(f"forwarding policy: expected positive intervals, rate and batch, got {self}")
 
 
-class HeldBatch(NamedTuple):
-    """What the publisher hands the spool: one device's samples of one kind for one format. Immutable;
-    one per live DATA message, so a NamedTuple (a frozen dataclass's __init__ costs twice as much)."""
+@dataclass(frozen=True, slots=True)
+class HeldBatch:
+    """What the publisher hands the spool: one device's samples of one kind for one format."""
 
     device_id: str
     kind: str  # "data" | "events"
@@ -61,7 +61,7 @@ class Outbox:
 
     def confirm(self, mark: int) -> int:
         """Forget the batches recorded before `mark` (they reached the broker); how many went."""
-        gone = bisect_left(self._entries, mark, key=_position)  # a barrier a second: O(log n), then memmove
+        gone = bisect_left(self._entries, mark, key=itemgetter(0))  # a barrier a second: O(log n), then memmove
         del self._entries[:gone]
         return gone
 
@@ -69,7 +69,3 @@ class Outbox:
         """Every unconfirmed batch, oldest first, leaving the outbox empty (the connection is suspect)."""
         entries, self._entries = self._entries, []
         return [batch for _, batch in entries]
-
-
-def _position(entry: tuple[int, HeldBatch]) -> int:
-    return entry[0]

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import paho.mqtt.client as paho
 
+from edge.publish.ddata import varint
+
 MAX_REMAINING_LENGTH = 268_435_455  # four length bytes
 MAX_TOPIC_BYTES = 65_535
 _PUBLISH = 0x30
@@ -25,17 +27,10 @@ Prefix = tuple[bytes, bytes]  # (first byte, variable header: topic and, for MQT
 
 
 def remaining_length(n: int) -> bytes:
+    """MQTT's remaining length: the same base-128 varint as protobuf's, at most four bytes."""
     if not 0 <= n <= MAX_REMAINING_LENGTH:
         raise ValueError(f"MQTT packet of {n} bytes is over the {MAX_REMAINING_LENGTH}-byte limit")
-    out = bytearray()
-    while True:
-        byte = n & 0x7F
-        n >>= 7
-        if n:
-            out.append(byte | 0x80)
-        else:
-            out.append(byte)
-            return bytes(out)
+    return varint(n)
 
 
 class TopicCache:

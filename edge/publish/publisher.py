@@ -19,7 +19,7 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal, Protocol, runtime_checkable
 
 from edge.publish.aliases import AliasMap
@@ -718,7 +718,7 @@ class Publisher:
                      time.monotonic() - started, spool.pending(fmt))
 
     def _historical_messages(self, fmt: Format, entry: Any) -> list[Outgoing]:
-        samples = [s if s.historical else s._replace(historical=True) for s in entry.samples]
+        samples = [s if s.historical else replace(s, historical=True) for s in entry.samples]
         if fmt == "sparkplug":
             return self._node.historical_data(entry.device_id, samples)
         topics = self._topics

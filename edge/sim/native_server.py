@@ -45,7 +45,6 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import (
-    REQUEST_SUBPACKET_FIXED,
     RESPONSE_SUB_LAYOUT,
     RESPONSE_SUBPACKET_FIXED,
     U16_LAYOUT,
@@ -54,10 +53,11 @@ from edge.focas.frame import (
     PduType,
     RequestSubpacket,
     ResponseSubpacket,
-    decode_request_body,
+    decode_request_chunk,
     encode_close_response,
     encode_open_response,
     encode_response,
+    request_chunks,
 )
 from edge.focas.functions import Context, Function, error_response
 from edge.focas.model import ParamRecord, PmcType
@@ -397,29 +397,6 @@ def compile_plan(state: MachineState, request: RequestSubpacket, ctx: Context) -
                       _answer_source(state, request, function, ctx))
 
 
-def _request_chunks(body: bytes) -> list[bytes]:
-    """The subpacket bytes of a well-formed 0x2101 body; a malformed one raises decode_request_body's
-    ProtocolError (the same checks, so the same bodies fail)."""
-    size = len(body)
-    if size >= 2:
-        (count,) = U16_LAYOUT.unpack_from(body, 0)
-        chunks = []
-        offset = 2
-        for _ in range(count):
-            if offset + 2 > size:
-                break
-            (length,) = U16_LAYOUT.unpack_from(body, offset)
-            if length < REQUEST_SUBPACKET_FIXED or offset + length > size:
-                break
-            chunks.append(body[offset : offset + length])
-            offset += length
-        else:
-            if offset == size:
-                return chunks
-    decode_request_body(body)  # raises the ProtocolError naming the fault
-    raise ProtocolError(f"data request: malformed {size}-byte body")  # pragma: no cover
-
-
 class AnswerPlans:
     """A machine's compiled answers, by request subpacket bytes (the same few reads every poll).
 
@@ -441,7 +418,7 @@ class AnswerPlans:
             self._compiled_for = (self.state.profile, ctx)
         plans = self._plans
         result = []
-        for chunk in _request_chunks(body):
+        for chunk in request_chunks(body):
             plan = plans.get(chunk)
             if plan is None:
                 plan = self._compile(chunk, ctx)
@@ -449,7 +426,7 @@ class AnswerPlans:
         return result
 
     def _compile(self, chunk: bytes, ctx: Context) -> AnswerPlan:
-        (request,) = decode_request_body(U16_LAYOUT.pack(1) + chunk)
+        request = decode_request_chunk(chunk)
         plan = compile_plan(self.state, request, ctx)
         if not request.extra:
             if len(self._plans) >= PLAN_CACHE_LIMIT:

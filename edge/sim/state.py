@@ -325,16 +325,12 @@ class MachineState:
                 self._cycle_alarm = None
 
     def _refresh_signals(self, t: float) -> None:
-        """F/Y signals that mirror the machine state (a ladder would set them).
-
-        Runs on every read that finds time moved, so it spells out _phase_at's "cutting" and
-        _alarms_active instead of calling them.
-        """
-        cycle = self.cycle
-        running = t % cycle.length < cycle.cut_seconds and not self.emergency
+        """F/Y signals that mirror the machine state (a ladder would set them)."""
+        cutting, _ = self._phase_at(t)
+        running = cutting and not self.emergency
         f, y = self._pmc["F"], self._pmc["Y"]
         f[0] = (0b1000_0000 if self.mode == AUT_MEM else 0) | (0b0010_0000 if running else 0)
-        f[1] = 0b0000_0001 if self._manual_alarms or self._cycle_alarm is not None else 0  # AL
+        f[1] = 0b0000_0001 if self._alarms_active() else 0  # AL
         y[0] = (y[0] & 0xFE) | (1 if running else 0)  # coolant on
 
     # ---- CNC clock ---------------------------------------------------------------------------------

@@ -1,12 +1,14 @@
 from __future__ import annotations
 
+import dataclasses
 import math
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.collect.changes import ChangeDetector, values_differ
-from edge.samples import MetricType, Quality, Sample
+from edge.samples import MetricType, Quality, Sample, new_sample
 
 
 def s(name: str, value: object, quality: Quality = Quality.GOOD, t: int = 0,
@@ -110,3 +112,11 @@ def test_property_report_decides_exactly_as_offer(offers: list[tuple[str, object
         assert offered == (reported is not None)
         assert reported is None or reported == Sample(name, value, kind, t, quality)
     assert by_offer.last_reported() == by_report.last_reported()
+
+
+def test_the_change_detectors_samples_are_the_samples_the_constructor_builds() -> None:
+    built = new_sample("Axis/X/Absolute", 1.5, MetricType.DOUBLE, 1_700_000_000_123, Quality.BAD)
+    assert built == Sample("Axis/X/Absolute", 1.5, MetricType.DOUBLE, 1_700_000_000_123, Quality.BAD)
+    assert type(built) is Sample and built.historical is False
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        built.value = 2.0  # type: ignore[misc]

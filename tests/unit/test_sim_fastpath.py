@@ -164,24 +164,15 @@ def test_the_cases_cover_every_function_the_simulator_handles() -> None:
     assert {(function.cls, function.command) for function in HANDLERS} <= commands
 
 
+@pytest.mark.parametrize("batch", [1, 32], ids=["each-request-alone", "whole-batches"])
 @pytest.mark.parametrize("profile", sorted(PROFILES))
-def test_every_request_alone_answers_the_reference_bytes_at_every_moment(profile: str) -> None:
+def test_requests_answer_the_reference_bytes_at_every_moment(profile: str, batch: int) -> None:
     twins = Twins(profile)
     requests = list(_requests_for(profile))
     for moment in MOMENTS:
         twins.at(moment)
-        for request in requests:
-            twins.assert_same([request])
-
-
-@pytest.mark.parametrize("profile", sorted(PROFILES))
-def test_whole_batches_answer_the_reference_bytes(profile: str) -> None:
-    twins = Twins(profile)
-    requests = list(_requests_for(profile))
-    for moment in MOMENTS:
-        twins.at(moment)
-        for start in range(0, len(requests), 32):
-            twins.assert_same(requests[start : start + 32])
+        for start in range(0, len(requests), batch):
+            twins.assert_same(requests[start : start + batch])
 
 
 def test_a_batch_with_one_oversized_answer_still_applies_every_write_then_fails_like_the_reference() -> None:
