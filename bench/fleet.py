@@ -112,12 +112,14 @@ def _split(count: int, parts: int) -> list[range]:
 def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess],
             subscriber: LatencySubscriber, broker: psutil.Process | None) -> dict[str, Any]:
     psutil.cpu_percent(None)
+    host_before = psutil.cpu_times()
     subscriber.take()
     subscriber.recording = True
     overruns_before = subscriber.overruns or 0
     sims_before = [sim.stats() for sim in sims]
     cpu_before = daemon.cpu_seconds()
     sys_before = daemon.system_seconds()
+    switches_before = daemon.context_switches()
     broker_before = _cpu(broker)
     spy = None
     if options.spy_to is not None:
@@ -133,10 +135,12 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     elapsed = time.monotonic() - started
     cpu = daemon.cpu_seconds() - cpu_before
     sys_cpu = daemon.system_seconds() - sys_before
+    switches = daemon.context_switches() - switches_before
     sims_after = [sim.stats() for sim in sims]
     subscriber.recording = False
     rss.append(daemon.rss_bytes())
     system_cpu = psutil.cpu_percent(None)
+    host_after = psutil.cpu_times()
     if spy is not None:
         spy.wait(30)
     change, sample = subscriber.take()
@@ -147,6 +151,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         "machines": options.machines,
         "cpu_us_per_cycle": cpu / cycles * 1e6 if cycles else float("nan"),
         "sys_us_per_cycle": sys_cpu / cycles * 1e6 if cycles else float("nan"),
+        "wakeups_per_cycle": switches / cycles if cycles else float("nan"),
         "gateway_cores": cpu / elapsed,
         "rss_mb": max(rss) / 1e6,
         "cycles_per_s": cycles / elapsed,
@@ -161,8 +166,15 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         "sim_cores": sim_cpu / elapsed,
         "broker_cores": (_cpu(broker) - broker_before) / elapsed,
         "host_cpu_pct": system_cpu,
+        "steal_pct": _steal_pct(host_before, host_after),
         "window_s": elapsed,
     }
+
+
+def _steal_pct(before: Any, after: Any) -> float:
+    """CPU time the hypervisor gave to other guests: the VM's noise, shown beside every figure."""
+    total = sum(after) - sum(before)
+    return 100 * (getattr(after, "steal", 0.0) - getattr(before, "steal", 0.0)) / total if total > 0 else 0.0
 
 
 def _cpu(process: psutil.Process | None) -> float:
@@ -172,10 +184,9 @@ def _cpu(process: psutil.Process | None) -> float:
     return float(times.user + times.system)
 
 
-SUMMARY_KEYS = ("cpu_us_per_cycle", "sys_us_per_cycle", "gateway_cores", "rss_mb", "cycles_per_s", "achieved_pct",
-                "overruns",
-                "change_p50_ms", "change_p99_ms", "sample_p50_ms", "sample_p99_ms", "sim_cores", "broker_cores",
-                "host_cpu_pct")
+SUMMARY_KEYS = ("cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb",
+                "cycles_per_s", "achieved_pct", "overruns", "change_p50_ms", "change_p99_ms", "sample_p50_ms",
+                "sample_p99_ms", "sim_cores", "broker_cores", "host_cpu_pct", "steal_pct")
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:

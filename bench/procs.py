@@ -87,6 +87,10 @@ class DaemonProcess:
         """The kernel's share (socket syscalls, epoll): what no Python change can take away."""
         return float(self.process.cpu_times().system)
 
+    def context_switches(self) -> int:
+        """Voluntary switches: each one is the process going to sleep and being woken again."""
+        return int(self.process.num_ctx_switches().voluntary)
+
     def rss_bytes(self) -> int:
         return int(self.process.memory_info().rss)
 

@@ -82,8 +82,19 @@ def _parse_duration(value: object) -> object:
 
 
 Duration = Annotated[float, BeforeValidator(_parse_duration), Field(gt=0)]
-Period = Annotated[float, BeforeValidator(_parse_duration), Field(ge=0.05)]
-DEFAULT_POLL_GRID_S = 0.025  # a quarter of a 100 ms poll period
+SHORTEST_PERIOD_S = 0.05
+Period = Annotated[float, BeforeValidator(_parse_duration), Field(ge=SHORTEST_PERIOD_S)]
+AUTO_POLL_GRID_CAP_S = 0.05  # `poll_grid_s: auto`: half the fleet's fastest period, never coarser than this
+
+
+def _parse_grid(value: object) -> object:
+    """`auto` (None: derived from the periods) or a duration."""
+    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+        return None
+    return _parse_duration(value)
+
+
+PollGrid = Annotated[Annotated[float, Field(gt=0, le=0.1)] | None, BeforeValidator(_parse_grid)]
 
 
 def check_sparkplug_id(value: str) -> str:
@@ -648,6 +659,11 @@ class SpoolConfig(_Model):
     max_age_s: Duration = 7 * 24 * 3600.0
 
 
+def _fastest_period(machine: MachineConfig) -> float:
+    periods = machine.poll.periods
+    return min(periods.status, periods.macros, periods.pmc, periods.params, periods.diags)
+
+
 class Config(_Model):
     mqtt: MqttConfig
     machines: list[MachineConfig] = Field(min_length=1)
@@ -658,7 +674,8 @@ class Config(_Model):
     spool: SpoolConfig = Field(default_factory=SpoolConfig)
     # Poll wake-ups are rounded up to this grid, so the machines due in one slot share one event-loop turn
     # (docs/performance.md): a poll is at most this much later than due, never earlier, never skipped.
-    poll_grid_s: Annotated[float, BeforeValidator(_parse_duration), Field(gt=0, le=0.1)] = DEFAULT_POLL_GRID_S
+    # None is `auto` (the default): see poll_grid_step_s.
+    poll_grid_s: PollGrid = None
 
     _warnings: list[str] = PrivateAttr(default_factory=list)
     _state_dir: Path = PrivateAttr(default=DEFAULT_STATE_DIR)
@@ -672,13 +689,26 @@ class Config(_Model):
 
     @model_validator(mode="after")
     def _grid_fits_every_period(self) -> Config:
+        if self.poll_grid_s is None:
+            return self  # auto fits by construction
         for machine in self.machines:
-            periods = machine.poll.periods
-            fastest = min(periods.status, periods.macros, periods.pmc, periods.params, periods.diags)
+            fastest = _fastest_period(machine)
             if self.poll_grid_s > fastest / 2:
                 raise ValueError(f"poll_grid_s {self.poll_grid_s:g}s is more than half of machine {machine.id!r}'s "
                                  f"fastest poll period ({fastest:g}s): lower poll_grid_s to {fastest / 2:g}s or less")
         return self
+
+    @property
+    def poll_grid_step_s(self) -> float:
+        """The grid in use: the configured one, or (auto) half the fleet's fastest period capped at 50 ms.
+
+        Coarser is cheaper (more machines share a loop turn, docs/performance.md); a poll is at most one
+        step late, and polls stay evenly spaced where the period is a multiple of the step. Half a period
+        keeps every fleet spread over at least two slots of a period.
+        """
+        if self.poll_grid_s is not None:
+            return self.poll_grid_s
+        return min(AUTO_POLL_GRID_CAP_S, min(_fastest_period(m) for m in self.machines) / 2)
 
     @property
     def warnings(self) -> list[str]:

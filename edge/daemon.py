@@ -78,7 +78,7 @@ class Daemon:
         self.spool = open_spool(self.state_dir, int(config.spool.max_bytes), config.spool.max_age_s)
         self.publisher = Publisher(publish_settings(config), spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
-        self.tick_grid = TickGrid(config.poll_grid_s)  # machines due in the same slot share one loop turn
+        self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(config, self.publisher, self.pollers)
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
@@ -197,8 +197,9 @@ class Daemon:
             log.warning("reload: mqtt settings changed; they take effect at the next restart")
         if new.http != self.config.http:
             log.warning("reload: http settings changed; they take effect at the next restart")
-        if new.poll_grid_s != self.config.poll_grid_s:
-            log.warning("reload: poll_grid_s changed; it takes effect at the next restart")
+        if new.poll_grid_step_s != self.tick_grid.step_s:
+            log.info("reload: poll grid %gs -> %gs", self.tick_grid.step_s, new.poll_grid_step_s)
+            self.tick_grid.step_s = new.poll_grid_step_s  # before any new machine sleeps on it
         old = {m.id: m for m in self.config.machines}
         fresh = {m.id: m for m in new.machines}
         changed = [i for i in old if i in fresh and (old[i] != fresh[i] or

@@ -29,10 +29,12 @@ def focas_edge_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "edge"]
 
 
-def daemon_config(broker: Mosquitto, state_dir: Path, machines: dict[str, int]) -> str:
+def daemon_config(broker: Mosquitto, state_dir: Path, machines: dict[str, int],
+                  polls: dict[str, str] | None = None) -> str:
     entries = "".join(
         f"  - {{id: {mid}, host: 127.0.0.1, port: {port}, "
-        f"timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.3}}}}\n"
+        f"timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.3}}"
+        f"{', poll: ' + polls[mid] if polls and mid in polls else ''}}}\n"
         for mid, port in machines.items())
     return f"""
 mqtt:
@@ -155,10 +157,12 @@ async def test_sighup_applies_machines_added_and_removed_without_dropping_the_br
         for machine in ("m1", "m2"):
             await observer.wait_topic(f"{GROUP}/DBIRTH/gw/{machine}", timeout=20)
         (nbirth,) = await observer.wait_count("NBIRTH", 1)
-        # Edit the file: m2 removed, m3 added, m1 unchanged; then SIGHUP.
-        config.write_text(daemon_config(mosquitto, state, {"m1": ports["m1"], "m3": ports["m3"]}))
+        # Edit the file: m2 removed, m3 added with a faster period, m1 unchanged; then SIGHUP.
+        config.write_text(daemon_config(mosquitto, state, {"m1": ports["m1"], "m3": ports["m3"]},
+                                        {"m3": "{periods: {status: 60ms}}"}))
         daemon.signal(signal.SIGHUP)
         await observer.wait_topic(f"{GROUP}/DBIRTH/gw/m3", timeout=15)
+        assert "reload: poll grid 0.05s -> 0.03s" in daemon.output()  # auto: half of m3's period, at once
         await observer.wait_topic(f"{GROUP}/DDEATH/gw/m2", timeout=15)
         await async_wait_for(lambda: fleet[1].sessions == 0, 5, message="m2's CNC session closed")
         m1_before = len(observer.on(f"{GROUP}/DDATA/gw/m1"))

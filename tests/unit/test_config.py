@@ -399,14 +399,28 @@ def test_arbitrary_text_only_raises_config_error(text: str) -> None:
         parse_config(text, "fuzz.yaml", {})
 
 
-def test_poll_grid_defaults_to_25_ms_and_takes_a_duration() -> None:
-    assert parse(MINIMAL).poll_grid_s == 0.025
-    assert parse(MINIMAL + "poll_grid_s: 50ms\n").poll_grid_s == 0.05
+def test_poll_grid_takes_a_duration() -> None:
+    config = parse(MINIMAL + "poll_grid_s: 30ms\n")
+    assert config.poll_grid_s == config.poll_grid_step_s == 0.03
+
+
+@pytest.mark.parametrize("setting", ["", "poll_grid_s: auto\n", "poll_grid_s: AUTO\n"])
+def test_poll_grid_auto_is_half_the_fastest_period_capped_at_50_ms(setting: str) -> None:
+    assert parse(MINIMAL + setting).poll_grid_s is None
+    assert parse(MINIMAL + setting).poll_grid_step_s == 0.05  # default periods: status 250 ms
+    fast = MINIMAL + "    poll: {periods: {status: 80ms}}\n" + setting
+    assert parse(fast).poll_grid_step_s == pytest.approx(0.04)
+
+
+def test_poll_grid_auto_follows_the_fastest_machine_of_the_fleet() -> None:
+    text = MINIMAL + "    poll: {periods: {status: 1s}}\n  - {id: m2, host: 10.0.0.2, poll: {periods: {pmc: 60ms}}}\n"
+    assert parse(text).poll_grid_step_s == pytest.approx(0.03)
 
 
 @pytest.mark.parametrize("grid,message", [
     ("0", "greater than 0"),
     ("200ms", "less than or equal to 0.1"),
+    ("soon", "expected a duration"),
 ])
 def test_poll_grid_out_of_range_is_refused(grid: str, message: str) -> None:
     problems = problems_of(MINIMAL + f"poll_grid_s: {grid}\n")
