@@ -1,6 +1,6 @@
 """`python -m bench [name ...] [--quick] [--repeat N]`: run benchmarks, print tables, save JSON.
 
-Names: codec, roundtrip, fleet, writes (default: all, in that order). Results go to bench/results/.
+Names: codec, roundtrip, fleet, floor, writes (default: all, in that order). Results go to bench/results/.
 """
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from bench import codec, fleet, roundtrip, writes
+from bench import codec, fleet, floor, roundtrip, writes
 from bench.report import Result, machine_info, render, save
 
-BENCHMARKS = ("codec", "roundtrip", "fleet", "writes")
+BENCHMARKS = ("codec", "roundtrip", "fleet", "floor", "writes")
 
 
 def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
@@ -30,6 +30,7 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         "codec": lambda: codec.run(quick=args.quick, repeats=max(args.repeat, 3)),
         "roundtrip": lambda: roundtrip.run(quick=args.quick, latency_s=args.latency),
         "fleet": run_fleet,
+        "floor": lambda: floor.run(quick=args.quick, duration_s=args.duration, repeats=args.repeat),
         "writes": lambda: writes.run(quick=args.quick),
     }
 

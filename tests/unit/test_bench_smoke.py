@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import codec, fleet, roundtrip, writes
+from bench import codec, fleet, floor, roundtrip, writes
 from bench.__main__ import main
 from bench.report import percentile
 from bench.simproc import stamp_latency, stamp_value
@@ -53,6 +53,12 @@ def test_fleet_measures_cpu_cycles_and_latency() -> None:
     assert row["cpu_us_per_cycle"] > 0 and not math.isnan(row["sample_p50_ms"])
     assert row["achieved_pct"] > 0 and row["planned_per_s"] == 20 and row["overruns"] >= 0
     assert row["changes_seen"] > 0 and not math.isnan(row["change_p99_ms"])  # a simulator change reached a subscriber
+
+
+def test_floor_measures_both_levels_against_the_fleet_simulators() -> None:
+    result = floor.run(quick=True, machines=2, duration_s=0.5)
+    assert [row["level"] for row in result.rows] == ["round trip", "client batch"]
+    assert all(row["cpu_us_per_cycle"] > 0 and row["achieved_pct"] > 0 for row in result.rows)
 
 
 @needs_broker
