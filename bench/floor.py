@@ -5,9 +5,11 @@ FocasClients in this process, at two levels:
 - round trip: write the tick's prepared request PDU and await its answer frame (event loop, kernel,
   frame decoding: nothing else);
 - client batch: `FocasClient.batch` of the tick's items (adds the session lock, the request deadline,
-  the answer split and the decode of what moved).
-CPU is this process's (user+sys) per cycle. The daemon's own figure (`python -m bench fleet`) adds the
-poller, change detection and publishing on top; the difference between the rows is what each layer costs.
+  the answer split and the decode of what moved);
+- poller: the collector's MachinePollers with the daemon's config for the fleet, handing their changes to
+  a sink that drops them (adds scheduling, change detection and Samples: everything but publishing).
+CPU is this process's (user+sys) per cycle. The daemon's own figure (`python -m bench fleet`) adds
+publishing on top; the difference between the rows is what each layer costs.
 """
 
 from __future__ import annotations
@@ -17,21 +19,42 @@ import contextlib
 import math
 import random
 import statistics
+import tempfile
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from bench.fleet import MACHINES_PER_SIM, _split
 from bench.procs import SimProcess
 from bench.report import Result
-from bench.workload import STAMP_MACRO, tick_items
+from bench.workload import STAMP_MACRO, poll_section, tick_items
+from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
+from edge.config import parse_config
 from edge.focas.client import FocasClient
 from edge.focas.frame import PduType
+from edge.samples import MetricSpec, Sample
 
 PERIOD_S = 0.1
 GRID_S = 0.05
-LEVELS = ("round trip", "client batch")
+LEVELS = ("round trip", "client batch", "poller")
+
+
+class DroppingSink:
+    """A DeviceSink that publishes nothing: the poller level measures collection alone."""
+
+    async def device_online(self, device_id: str, specs: Sequence[MetricSpec], samples: Sequence[Sample]) -> None:
+        pass
+
+    async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
+        pass
+
+    async def device_events(self, device_id: str, events: Sequence[Sample]) -> None:
+        pass
+
+    async def device_offline(self, device_id: str) -> None:
+        pass
 
 
 def _operation(level: str, cnc: FocasClient) -> Callable[[], Awaitable[Any]]:
@@ -43,7 +66,40 @@ def _operation(level: str, cnc: FocasClient) -> Callable[[], Awaitable[Any]]:
     return lambda: cnc._roundtrip(data, PduType.DATA_RESPONSE, "floor")
 
 
+async def _measure(count: Callable[[], int], warmup_s: float, duration_s: float, planned_per_s: float
+                   ) -> dict[str, float]:
+    await asyncio.sleep(warmup_s)
+    cpu_before, cycles_before, started = time.process_time(), count(), time.monotonic()
+    await asyncio.sleep(duration_s)
+    cpu, done, elapsed = time.process_time() - cpu_before, count() - cycles_before, time.monotonic() - started
+    return {"cpu_us_per_cycle": cpu / done * 1e6 if done else math.nan, "cycles_per_s": done / elapsed,
+            "achieved_pct": 100 * done / elapsed / planned_per_s}
+
+
+async def _pollers(ports: list[int], warmup_s: float, duration_s: float) -> dict[str, float]:
+    machines = "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll_section(PERIOD_S)}}}\n"
+                       for i, port in enumerate(ports))
+    config = parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
+                          f"poll_grid_s: {GRID_S}\nmachines:\n{machines}", "floor", {})
+    grid, sink = TickGrid(config.poll_grid_step_s), DroppingSink()
+    with tempfile.TemporaryDirectory(prefix="bench-floor-") as state:
+        pollers = [MachinePoller(m, config.alarms_for(m), sink, Path(state), jitter_s=PERIOD_S, grid=grid)
+                   for m in config.machines]
+        tasks = [asyncio.create_task(poller.run()) for poller in pollers]
+        try:
+            return await _measure(lambda: sum(p.stats.ticks for p in pollers), warmup_s, duration_s,
+                                  len(ports) / PERIOD_S)
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            for poller in pollers:
+                await poller.close()
+
+
 async def _poll(ports: list[int], level: str, warmup_s: float, duration_s: float) -> dict[str, float]:
+    if level == "poller":
+        return await _pollers(ports, warmup_s, duration_s)
     loop = asyncio.get_running_loop()
     grid = TickGrid(GRID_S)
     cycles = 0
@@ -63,16 +119,11 @@ async def _poll(ports: list[int], level: str, warmup_s: float, duration_s: float
 
         tasks = [asyncio.create_task(machine(cnc)) for cnc in clients]
         try:
-            await asyncio.sleep(warmup_s)
-            cpu_before, cycles_before, started = time.process_time(), cycles, time.monotonic()
-            await asyncio.sleep(duration_s)
-            cpu, done, elapsed = time.process_time() - cpu_before, cycles - cycles_before, time.monotonic() - started
+            return await _measure(lambda: cycles, warmup_s, duration_s, len(ports) / PERIOD_S)
         finally:
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
-    return {"cpu_us_per_cycle": cpu / done * 1e6 if done else math.nan, "cycles_per_s": done / elapsed,
-            "achieved_pct": 100 * done / elapsed / (len(ports) / PERIOD_S)}
 
 
 def run(quick: bool = False, machines: int = 100, duration_s: float | None = None, repeats: int = 2) -> Result:
@@ -85,7 +136,7 @@ def run(quick: bool = False, machines: int = 100, duration_s: float | None = Non
     try:
         ports = [port for sim in sims for port in sim.ports]
         for level in LEVELS:
-            runs = [asyncio.run(_poll(ports, level, 0.3 if quick else 3.0, duration)) for _ in range(repeats)]
+            runs = [asyncio.run(_poll(ports, level, 0.5 if quick else 3.0, duration)) for _ in range(repeats)]
             cpu = [r["cpu_us_per_cycle"] for r in runs]
             result.rows.append({"level": level, "machines": machines, "runs": repeats,
                                 "cpu_us_per_cycle": statistics.median(cpu),
