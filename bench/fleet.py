@@ -22,7 +22,7 @@ import psutil
 from bench.procs import DaemonProcess, SimProcess
 from bench.report import Check, Result, percentile
 from bench.subscriber import LatencySubscriber
-from bench.workload import STAMP_MACRO, poll_section
+from bench.workload import STAMP_MACRO, machines_section
 from tests.helpers import Mosquitto, mosquitto_binary
 
 GROUP = "bench"
@@ -44,12 +44,9 @@ class FleetOptions:
 
 
 def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float) -> str:
-    poll = poll_section(period_s)
-    machines = "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll}}}\n"
-                       for i, port in enumerate(ports))
     return (f"mqtt:\n  host: {broker.host}\n  port: {broker.port}\n  formats: [sparkplug]\n"
             f"  sparkplug: {{group_id: {GROUP}, edge_node_id: gw}}\n"
-            f"state_dir: {state_dir}\nmachines:\n{machines}")
+            f"state_dir: {state_dir}\nmachines:\n{machines_section(ports, period_s)}")
 
 
 def wait_until(condition: Any, timeout: float, what: str) -> None:
@@ -75,8 +72,7 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         broker_process = psutil.Process(broker.proc.pid) if broker.proc else None
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}")
         n = options.machines
-        sizes = [len(part) for part in _split(n, math.ceil(n / MACHINES_PER_SIM))]
-        sims = [SimProcess(size, stamp_macro=STAMP_MACRO) for size in sizes]
+        sims = start_fleet_sims(n)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, options.period_s))
@@ -104,9 +100,19 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
             shutil.rmtree(workdir, ignore_errors=True)
 
 
-def _split(count: int, parts: int) -> list[range]:
-    size = math.ceil(count / parts)
-    return [range(i, min(i + size, count)) for i in range(0, count, size)]
+def start_fleet_sims(machines: int) -> list[SimProcess]:
+    """The fleet's simulated CNCs, MACHINES_PER_SIM to a process (each stamps the latency macro)."""
+    parts = math.ceil(machines / MACHINES_PER_SIM)
+    size = math.ceil(machines / parts)
+    sims: list[SimProcess] = []
+    try:
+        for first in range(0, machines, size):
+            sims.append(SimProcess(min(size, machines - first), stamp_macro=STAMP_MACRO))
+    except BaseException:
+        for sim in sims:
+            sim.stop()
+        raise
+    return sims
 
 
 def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess],

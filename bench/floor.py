@@ -25,10 +25,9 @@ from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from bench.fleet import MACHINES_PER_SIM, _split
-from bench.procs import SimProcess
+from bench.fleet import start_fleet_sims
 from bench.report import Result
-from bench.workload import STAMP_MACRO, poll_section, tick_items
+from bench.workload import machines_section, tick_items
 from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
 from edge.config import parse_config
@@ -77,10 +76,8 @@ async def _measure(count: Callable[[], int], warmup_s: float, duration_s: float,
 
 
 async def _pollers(ports: list[int], warmup_s: float, duration_s: float) -> dict[str, float]:
-    machines = "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll_section(PERIOD_S)}}}\n"
-                       for i, port in enumerate(ports))
     config = parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
-                          f"poll_grid_s: {GRID_S}\nmachines:\n{machines}", "floor", {})
+                          f"poll_grid_s: {GRID_S}\nmachines:\n{machines_section(ports, PERIOD_S)}", "floor", {})
     grid, sink = TickGrid(config.poll_grid_step_s), DroppingSink()
     with tempfile.TemporaryDirectory(prefix="bench-floor-") as state:
         pollers = [MachinePoller(m, config.alarms_for(m), sink, Path(state), jitter_s=PERIOD_S, grid=grid)
@@ -131,8 +128,7 @@ def run(quick: bool = False, machines: int = 100, duration_s: float | None = Non
     duration = duration_s or (1.0 if quick else 15.0)
     repeats = 1 if quick else repeats
     result = Result("floor", f"python -m bench floor{' --quick' if quick else ''} --repeat {repeats}")
-    sims = [SimProcess(len(part), stamp_macro=STAMP_MACRO)
-            for part in _split(machines, math.ceil(machines / MACHINES_PER_SIM))]
+    sims = start_fleet_sims(machines)
     try:
         ports = [port for sim in sims for port in sim.ports]
         for level in LEVELS:

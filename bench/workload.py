@@ -25,6 +25,13 @@ def tick_items() -> list[it.ReadItem]:
     return [*status, it.ReadMacros(MACRO_FIRST, MACRO_LAST), *pmc, it.ReadClock()]
 
 
+def machines_section(ports: list[int], period_s: float) -> str:
+    """The `machines:` entries of a daemon config for simulated CNCs on these local ports, this plan each."""
+    poll = poll_section(period_s)
+    return "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll}}}\n"
+                   for i, port in enumerate(ports))
+
+
 def poll_section(period_s: float) -> str:
     """The `poll:` YAML of one machine for the same plan, every group every `period_s`."""
     pmc = ", ".join(f"{{range: {a}{s}-{a}{e}, data_type: {t.name.lower()}}}" for a, s, e, t in PMC_RANGES)

@@ -263,6 +263,10 @@ class Periods(_Model):
     params: Period = 60.0
     diags: Period = 60.0
 
+    @property
+    def fastest_s(self) -> float:
+        return min(self.status, self.macros, self.pmc, self.params, self.diags)
+
 
 def _not_before(end: int | None, start: int | None) -> int | None:
     """The end of an inclusive range, refused when it lies before the start."""
@@ -659,11 +663,6 @@ class SpoolConfig(_Model):
     max_age_s: Duration = 7 * 24 * 3600.0
 
 
-def _fastest_period(machine: MachineConfig) -> float:
-    periods = machine.poll.periods
-    return min(periods.status, periods.macros, periods.pmc, periods.params, periods.diags)
-
-
 class Config(_Model):
     mqtt: MqttConfig
     machines: list[MachineConfig] = Field(min_length=1)
@@ -692,7 +691,7 @@ class Config(_Model):
         if self.poll_grid_s is None:
             return self  # auto fits by construction
         for machine in self.machines:
-            fastest = _fastest_period(machine)
+            fastest = machine.poll.periods.fastest_s
             if self.poll_grid_s > fastest / 2:
                 raise ValueError(f"poll_grid_s {self.poll_grid_s:g}s is more than half of machine {machine.id!r}'s "
                                  f"fastest poll period ({fastest:g}s): lower poll_grid_s to {fastest / 2:g}s or less")
@@ -708,7 +707,7 @@ class Config(_Model):
         """
         if self.poll_grid_s is not None:
             return self.poll_grid_s
-        return min(AUTO_POLL_GRID_CAP_S, min(_fastest_period(m) for m in self.machines) / 2)
+        return min(AUTO_POLL_GRID_CAP_S, min(m.poll.periods.fastest_s for m in self.machines) / 2)
 
     @property
     def warnings(self) -> list[str]:

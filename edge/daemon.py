@@ -197,9 +197,10 @@ class Daemon:
             log.warning("reload: mqtt settings changed; they take effect at the next restart")
         if new.http != self.config.http:
             log.warning("reload: http settings changed; they take effect at the next restart")
-        if new.poll_grid_step_s != self.tick_grid.step_s:
-            log.info("reload: poll grid %gs -> %gs", self.tick_grid.step_s, new.poll_grid_step_s)
-            self.tick_grid.step_s = new.poll_grid_step_s  # before any new machine sleeps on it
+        step = new.poll_grid_step_s
+        if step != self.tick_grid.step_s:
+            log.info("reload: poll grid %gs -> %gs", self.tick_grid.step_s, step)
+            self.tick_grid.step_s = step  # before any new machine sleeps on it
         old = {m.id: m for m in self.config.machines}
         fresh = {m.id: m for m in new.machines}
         changed = [i for i in old if i in fresh and (old[i] != fresh[i] or
