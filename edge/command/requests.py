@@ -29,13 +29,11 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from edge.command.errors import CommandRefused, ErrorCode
+from edge.command.signedness import PMC_READINGS
 from edge.focas.model import PmcType
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_writable
 
 I32 = (-(2**31), 2**31 - 1)
-# A PMC element accepts its signed and its unsigned reading (0xFF and -1 are the same byte).
-PMC_INT_LIMITS = {PmcType.BYTE: (-(2**7), 2**8 - 1), PmcType.WORD: (-(2**15), 2**16 - 1),
-                  PmcType.LONG: (-(2**31), 2**32 - 1)}
 FLOAT32_MAX = 3.4028234663852886e38
 MAX_WRITES_PER_REQUEST = 64
 # A request is at most three levels deep (list > object > list value); deeper is refused before parsing,
@@ -48,10 +46,12 @@ WriteValue = float | bool | int | tuple[int | float, ...]
 @dataclass(frozen=True, slots=True)
 class WriteOp:
     """One validated write. `value`: float (macro), bool (any bit), int|float (parameter), or a tuple of
-    elements (PMC, one per data_type element of the range)."""
+    elements (PMC, one per data_type element of the range). `bounded`: the allow rule that accepted it has
+    a min/max, so a value only fitting the other signed/unsigned reading is refused (edge.command.signedness)."""
 
     target: WritableTarget
     value: WriteValue
+    bounded: bool = False
 
     @property
     def text(self) -> str:
@@ -123,7 +123,7 @@ def pmc_elements(target: PmcTarget, raw: object) -> tuple[int | float, ...]:
             out.append(number)
             continue
         integer = _integer(where, part)
-        low, high = PMC_INT_LIMITS[kind]
+        low, high = PMC_READINGS[kind].accepted  # either reading: 0xFF and -1 are the same byte
         if not low <= integer <= high:
             raise _wrong(f"{where}: {integer} does not fit a {kind.name.lower()} ({kind.width * 8} bits, "
                          f"{low}..{high})")

@@ -12,7 +12,7 @@ import asyncio
 import logging
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from edge.collect.plan import MachinePlan
@@ -164,18 +164,21 @@ class CommandService:
                    source: CommandSource) -> list[WriteResult]:
         """Check every item; if all pass, admit (rate limit) and queue them; audit and count each."""
         policy = self.config.write_policy(machine)
-        results = self._check(machine, policy, items)
-        if results is None:
-            ops = [item.op for item in items if item.op is not None]
-            results = await self._queue_and_wait(machine, policy, ops)
+        checked = self._check(machine, policy, items)
+        if isinstance(checked, tuple):
+            results = await self._queue_and_wait(machine, policy, list(checked))
+        else:
+            results = checked
         for item, result in zip(items, results, strict=True):
             self._record(machine.id, source, item, result)
         return results
 
     def _check(self, machine: MachineConfig, policy: WritePolicy,
-               items: Sequence[RequestItem]) -> list[WriteResult] | None:
-        """None if every item may be written; else a result per item (the first refusal, the rest skipped)."""
+               items: Sequence[RequestItem]) -> tuple[WriteOp, ...] | list[WriteResult]:
+        """The ops to write (each marked whether a bound applied) if every item may be written; else a result
+        per item (the first refusal, the rest skipped)."""
         sysinfo = self._sysinfo(machine.id)
+        ops: list[WriteOp] = []
         for index, item in enumerate(items):
             refusal = item.refused
             if refusal is None and self._closing:
@@ -183,14 +186,14 @@ class CommandService:
             if refusal is None:
                 assert item.op is not None
                 try:
-                    authorise(item.op, policy)
+                    ops.append(replace(item.op, bounded=authorise(item.op, policy)))
                     check_limits(item.op.target, sysinfo)
                 except CommandRefused as exc:
                     refusal = exc
             if refusal is not None:
                 return [WriteResult.refused(i.op, refusal) if n == index else WriteResult.skipped(i.op, index)
                         for n, i in enumerate(items)]
-        return None
+        return tuple(ops)
 
     async def _queue_and_wait(self, machine: MachineConfig, policy: WritePolicy,
                               ops: list[WriteOp]) -> list[WriteResult]:
