@@ -81,15 +81,16 @@ class CommandService:
         self._counters["requests"] += 1
         machine = self._machine(device_id)
         try:
-            if machine is None:
-                raise CommandRefused(ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured")
-            parsed = parse_request(payload, self.config.write_policy(machine).max_payload_bytes)
+            parsed = parse_request(payload, self.config.writes.max_payload_bytes)
         except CommandRefused as refusal:
             self._record(device_id, source, None, WriteResult.refused(None, refusal))
             await self.publisher.publish_json_reply(device_id, request_error(refusal.code, refusal.message), source)
             return
-        assert machine is not None
-        results = await self._run(machine, list(parsed.items), source)
+        if machine is None:
+            results = self._refuse_all(device_id, parsed.items, source, CommandRefused(
+                ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured"))
+        else:
+            results = await self._run(machine, list(parsed.items), source)
         replies = [reply(item.id, item.target_text, result) for item, result in zip(parsed.items, results,
                                                                                      strict=True)]
         if parsed.is_list:
@@ -97,6 +98,14 @@ class CommandService:
             await self.publisher.publish_json_reply(device_id, replies, source)
         else:
             await self.publisher.publish_json_reply(device_id, replies[0], source)
+
+    def _refuse_all(self, device_id: str, items: Sequence[RequestItem], source: CommandSource,
+                    refusal: CommandRefused) -> list[WriteResult]:
+        """One refusal for every item (each keeps its id and target in the reply), audited."""
+        results = [WriteResult.refused(item.op, refusal) for item in items]
+        for item, result in zip(items, results, strict=True):
+            self._record(device_id, source, item, result)
+        return results
 
     # ---- Sparkplug DCMD --------------------------------------------------------------------------------
     async def on_device_command(self, device_id: str, metric_name: str, value: object,
@@ -110,6 +119,14 @@ class CommandService:
             asyncio.get_running_loop().call_soon(self._start_dcmd, key)
         batch.metrics.append((metric_name, value))
         await batch.done.wait()
+
+    def on_device_command_refused(self, device_id: str, metric: str | None, code: str, reason: str,
+                                  source: CommandSource) -> None:
+        """A DCMD metric the publisher refused (unknown device or metric, read-only, wrong datatype, a
+        number outside its datatype): one audit line and the outcome counters, like any other refusal."""
+        refusal = CommandRefused(_CODES.get(code, ErrorCode.MALFORMED), reason)
+        item = RequestItem(0, None, None, None, metric, None, refusal)
+        self._record(device_id, source, item, WriteResult.refused(None, refusal))
 
     def _start_dcmd(self, key: tuple[str, str]) -> None:
         batch = self._dcmd.pop(key)
@@ -243,6 +260,8 @@ class CommandService:
         poller = self.pollers.get(machine_id)
         return poller.session.sysinfo if poller is not None else None
 
+
+_CODES = {code.value: code for code in ErrorCode}
 
 # Codes meaning "refused before the CNC was asked" (counted as writes_refused, not writes_failed).
 REFUSALS = frozenset({ErrorCode.MALFORMED, ErrorCode.PAYLOAD_TOO_LARGE, ErrorCode.UNKNOWN_MACHINE,
