@@ -177,9 +177,9 @@ def holds(write: Write, shown: object) -> bool:
         return isinstance(shown, int) and bool(shown) is wanted
     if isinstance(target, PmcTarget):
         values = list(shown.values()) if isinstance(shown, dict) else [shown]
-        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
-            return False
-        return pmc_bytes(target, tuple(values)) == wanted  # bytes: -1 written to a byte reads back 255
+        numbers = tuple(v for v in values if isinstance(v, int | float) and not isinstance(v, bool))
+        # compared as bytes: -1 written to a byte reads back 255
+        return len(numbers) == len(values) and pmc_bytes(target, numbers) == wanted
     if not isinstance(shown, int | float) or isinstance(shown, bool) or isinstance(wanted, bytes):
         return False
     expected = expected_macro(float(wanted)) if isinstance(target, MacroTarget) else float(wanted)
