@@ -33,11 +33,12 @@ from edge.cli.read import (
     parse_and_open,
     plan_read,
 )
-from edge.command.requests import pmc_bytes
-from edge.command.target_io import expected_macro, write_target
+from edge.command.errors import CommandRefused
+from edge.command.requests import WriteOp, pmc_bytes
+from edge.command.target_io import check_param, expected_macro, param_record, read_item, write_target
 from edge.focas.errors import FocasError
 from edge.focas.model import PmcType
-from edge.targets import MacroTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
+from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
 
 _PMC_FORMATS = {PmcType.BYTE: "B", PmcType.WORD: "H", PmcType.LONG: "I", PmcType.FLOAT: "f",
                 PmcType.DOUBLE: "d"}
@@ -151,8 +152,9 @@ async def write_all(session: Any, writes: list[Write]) -> list[ItemOutcome]:
         async with session as cnc:
             for write in writes:
                 try:
+                    await check_param_type(cnc, write)
                     await apply(cnc, write)
-                except FocasError as exc:
+                except (FocasError, CommandRefused) as exc:
                     outcomes.append(ItemOutcome(write.text, error=exc))
                     break
                 (read_back,) = await read_all_connected(cnc, str(write.target))
@@ -168,6 +170,15 @@ async def write_all(session: Any, writes: list[Write]) -> list[ItemOutcome]:
         failed = writes[len(outcomes)].text if len(outcomes) < len(writes) else "connection"
         outcomes.append(ItemOutcome(failed, error=exc))
     return outcomes
+
+
+async def check_param_type(cnc: Any, write: Write) -> None:
+    """A whole parameter's value must fit the type the CNC reports (2^31 is no 2-word value: it would land
+    as -2^31); CommandRefused before anything is written. The daemon's rule, without its allow-list."""
+    target = write.target
+    if isinstance(target, ParamTarget) and target.bit is None and not isinstance(write.value, bytes | bool):
+        result = await cnc.read(read_item(target))
+        check_param(WriteOp(target, write.value), param_record(target, result))
 
 
 def holds(write: Write, shown: object) -> bool:
@@ -223,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
                               "error": _error_object(outcome.error) if outcome.error else None}))
         elif outcome.error is None:
             print(f"{outcome.item}  ok, reads back {json.dumps(json_value(outcome.value))}")
-        if isinstance(outcome.error, ReadBackDiffers):
+        if isinstance(outcome.error, ReadBackDiffers | CommandRefused):
             print(f"focas-edge write: {outcome.item}: {outcome.error}", file=sys.stderr)
         elif outcome.error is not None:
             print(f"focas-edge write: {outcome.item}: {describe_error(outcome.error)}", file=sys.stderr)
@@ -234,4 +245,6 @@ def run(args: argparse.Namespace) -> int:
 def _error_object(error: BaseException) -> dict[str, Any]:
     if isinstance(error, ReadBackDiffers):
         return {"type": type(error).__name__, "code": error.code, "message": str(error)}
+    if isinstance(error, CommandRefused):
+        return {"type": type(error).__name__, "code": str(error.code), "message": error.message}
     return error_object(error)

@@ -238,3 +238,16 @@ def test_write_that_holds_exits_0(sim: Sim, capsys: pytest.CaptureFixture[str]) 
     code, out, err = run_cli(capsys, "write", sim.address, "pmc:R130=-1", "pmc:D2310.word=65535", "macro:514=0.5")
     assert code == 0, err
     assert "pmc:R130=-1  ok, reads back 255" in out
+
+
+def test_parameter_value_outside_its_type_is_refused_before_writing(sim: Sim,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    sim.state.set_param_write_enable(True)
+    try:
+        before = len(sim.state.writes("param:"))
+        code, _, err = run_cli(capsys, "write", "--transport", "packed", sim.packed.address, "param:6711=2147483648")
+        assert code == 1
+        assert "two-word" in err and "2147483648" in err and "wrong_type" in err
+        assert len(sim.state.writes("param:")) == before  # nothing reached the CNC (it would land as -2^31)
+    finally:
+        sim.state.set_param_write_enable(False)
