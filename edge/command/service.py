@@ -124,7 +124,11 @@ class CommandService:
                                   source: CommandSource) -> None:
         """A DCMD metric the publisher refused (unknown device or metric, read-only, wrong datatype, a
         number outside its datatype): one audit line and the outcome counters, like any other refusal."""
-        refusal = CommandRefused(_CODES.get(code, ErrorCode.MALFORMED), reason)
+        try:
+            error = ErrorCode(code)
+        except ValueError:  # not expected: the publisher names ErrorCode values
+            error = ErrorCode.MALFORMED
+        refusal = CommandRefused(error, reason)
         item = RequestItem(0, None, None, None, metric, None, refusal)
         self._record(device_id, source, item, WriteResult.refused(None, refusal))
 
@@ -260,8 +264,6 @@ class CommandService:
         poller = self.pollers.get(machine_id)
         return poller.session.sysinfo if poller is not None else None
 
-
-_CODES = {code.value: code for code in ErrorCode}
 
 # Codes meaning "refused before the CNC was asked" (counted as writes_refused, not writes_failed).
 REFUSALS = frozenset({ErrorCode.MALFORMED, ErrorCode.PAYLOAD_TOO_LARGE, ErrorCode.UNKNOWN_MACHINE,
