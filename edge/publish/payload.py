@@ -3,7 +3,8 @@
 The mapping follows Tahu Java, the TCK and Ignition rather than the loose wording of the spec
 (shared/docs/sparkplug.md §1.10): Int8/Int16/Int32/UInt8/UInt16 travel in `int_value`, signed ones
 sign-extended to 32 bits; Int64/UInt64/UInt32/DateTime travel in `long_value`, Int64 as two's complement.
-Decoding is tolerant (UInt32 in either field, sign-extended or plain small ints) because hosts differ.
+Decoding accepts what hosts differ on (any integer type in either field, signed ones sign-extended to
+the field) but never wraps: a number outside its datatype is a ValueError, as a DCMD value must land as sent.
 
 The DATA path is table-driven: one precomputed writer per type appends a metric with a single protobuf call,
 so encoding costs no per-metric branching in Python.
