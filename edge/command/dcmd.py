@@ -65,7 +65,7 @@ def merge_adjacent(ops: Sequence[WriteOp]) -> list[WriteOp]:
             assert isinstance(previous.target, PmcTarget) and isinstance(op.target, PmcTarget)
             assert isinstance(previous.value, tuple) and isinstance(op.value, tuple)
             target = PmcTarget(op.target.area, previous.target.start, op.target.end, op.target.data_type)
-            merged[-1] = WriteOp(target, previous.value + op.value)
+            merged[-1] = WriteOp(target, previous.value + op.value, previous.bounded or op.bounded)
         else:
             merged.append(op)
     return merged

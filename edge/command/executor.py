@@ -153,14 +153,20 @@ class MachineWriteQueue:
         """The write got no answer: re-read (never re-send) once the session is back, and say what is there."""
         log.warning("write unanswered, re-reading machine=%s target=%s error=%s", self.machine_id, op.text, error)
         what = f"the CNC did not answer the write ({code_for(error)}: {error})"
+        unknown = "unknown whether it was applied (it was not sent again)"
         try:
             poller = await self._wait_ready(time.monotonic() + self._deadline_s())
+        except CommandRefused:
+            message = (f"{what}; the target could not be re-read: no CNC session within the reconnect deadline "
+                       f"({self._deadline_s():g} s); {unknown}")
+            return WriteResult(op, False, ErrorCode.TIMEOUT, message, old=old)
+        try:
             current, cnc_time = await self._read_back(poller, op)
-        except (CommandRefused, FocasError) as exc:
-            message = f"{what}; the target could not be re-read ({exc}): unknown whether it was applied"
+        except FocasError as exc:
+            message = f"{what}; the target could not be re-read ({exc}); {unknown}"
             return WriteResult(op, False, ErrorCode.TIMEOUT, message, old=old)
         if isinstance(current, FocasError):
-            message = f"{what}; the re-read failed ({current}): unknown whether it was applied"
+            message = f"{what}; the target could not be re-read ({current}); {unknown}"
             return WriteResult(op, False, ErrorCode.TIMEOUT, message, old=old, cnc_time_ms=cnc_time)
         if target_io.holds(op, current):
             return WriteResult(op, True, old=old, read_back=current, cnc_time_ms=cnc_time,

@@ -10,11 +10,18 @@ from collections.abc import Callable
 
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import WriteOp
+from edge.command.signedness import PMC_READINGS, Reading
 from edge.config import AllowRule, RateLimit, WritePolicy
+from edge.targets import PmcTarget
 
 
-def authorise(op: WriteOp, policy: WritePolicy) -> None:
-    """Raise CommandRefused (disabled, not_allowed, out_of_bounds) unless the policy allows `op`."""
+def authorise(op: WriteOp, policy: WritePolicy) -> bool:
+    """Raise CommandRefused (disabled, not_allowed, out_of_bounds) unless the policy allows `op`.
+
+    Bounds are checked against the number the CNC will hold (edge.command.signedness); a value given in
+    the other reading of its width is refused by a bounded rule. Returns whether the rule that accepted
+    `op` has a bound (a parameter's reading is known only after its type is read: the executor checks).
+    """
     if not policy.enabled:
         raise CommandRefused(ErrorCode.DISABLED, "writes are disabled for this machine "
                              "(writes.enabled is false, or the machine's writes.enabled)")
@@ -22,10 +29,21 @@ def authorise(op: WriteOp, policy: WritePolicy) -> None:
     if not covering:
         raise CommandRefused(ErrorCode.NOT_ALLOWED, f"{op.target} is not covered by any writes.allow pattern")
     values = numeric_values(op)
-    if any(all(_within(rule, v) for v in values) for rule in covering):
-        return
+    reading = _pmc_reading(op)
+    other = reading is not None and any(reading.is_other(int(v)) for v in values)
+    held = tuple(float(reading.held(int(v))) for v in values) if reading is not None else values
+    unbounded = [rule for rule in covering if rule.min is None and rule.max is None]
+    if unbounded:
+        return False
+    if not other and any(all(_within(rule, v) for v in held) for rule in covering):
+        return True
     bounds = ", ".join(_describe(rule) for rule in covering)
-    shown = values[0] if len(values) == 1 else list(values)
+    shown = _shown(values)
+    if other:
+        assert reading is not None and isinstance(op.target, PmcTarget)
+        raise CommandRefused(ErrorCode.OUT_OF_BOUNDS, f"{op.target}: value {shown} would be held as {_shown(held)} "
+                             f"(a {op.target.data_type.name.lower()} reads {reading.describe()}); a bounded rule "
+                             f"({bounds}) takes values in that reading only")
     raise CommandRefused(ErrorCode.OUT_OF_BOUNDS, f"{op.target}: value {shown} is outside {bounds}")
 
 
@@ -34,6 +52,18 @@ def numeric_values(op: WriteOp) -> tuple[float, ...]:
     if isinstance(op.value, tuple):
         return tuple(float(v) for v in op.value)
     return (float(op.value),)
+
+
+def _pmc_reading(op: WriteOp) -> Reading | None:
+    target = op.target
+    if isinstance(target, PmcTarget) and target.bit is None:
+        return PMC_READINGS.get(target.data_type)
+    return None
+
+
+def _shown(values: tuple[float, ...]) -> object:
+    numbers = [int(v) if v.is_integer() else v for v in values]
+    return numbers[0] if len(numbers) == 1 else numbers
 
 
 def _within(rule: AllowRule, value: float) -> bool:

@@ -20,8 +20,6 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    StrictBool,
-    StrictFloat,
     StrictInt,
     StrictStr,
     ValidationError,
@@ -31,27 +29,29 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from edge.command.errors import CommandRefused, ErrorCode
+from edge.command.signedness import PMC_READINGS
 from edge.focas.model import PmcType
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_writable
 
 I32 = (-(2**31), 2**31 - 1)
-# A PMC element accepts its signed and its unsigned reading (0xFF and -1 are the same byte).
-PMC_INT_LIMITS = {PmcType.BYTE: (-(2**7), 2**8 - 1), PmcType.WORD: (-(2**15), 2**16 - 1),
-                  PmcType.LONG: (-(2**31), 2**32 - 1)}
 FLOAT32_MAX = 3.4028234663852886e38
 MAX_WRITES_PER_REQUEST = 64
+# A request is at most three levels deep (list > object > list value); deeper is refused before parsing,
+# so no document can drive the JSON parser into RecursionError (~1000 levels).
+MAX_JSON_DEPTH = 16
 
-Scalar = StrictBool | StrictInt | StrictFloat
 WriteValue = float | bool | int | tuple[int | float, ...]
 
 
 @dataclass(frozen=True, slots=True)
 class WriteOp:
     """One validated write. `value`: float (macro), bool (any bit), int|float (parameter), or a tuple of
-    elements (PMC, one per data_type element of the range)."""
+    elements (PMC, one per data_type element of the range). `bounded`: the allow rule that accepted it has
+    a min/max, so a value only fitting the other signed/unsigned reading is refused (edge.command.signedness)."""
 
     target: WritableTarget
     value: WriteValue
+    bounded: bool = False
 
     @property
     def text(self) -> str:
@@ -123,7 +123,7 @@ def pmc_elements(target: PmcTarget, raw: object) -> tuple[int | float, ...]:
             out.append(number)
             continue
         integer = _integer(where, part)
-        low, high = PMC_INT_LIMITS[kind]
+        low, high = PMC_READINGS[kind].accepted  # either reading: 0xFF and -1 are the same byte
         if not low <= integer <= high:
             raise _wrong(f"{where}: {integer} does not fit a {kind.name.lower()} ({kind.width * 8} bits, "
                          f"{low}..{high})")
@@ -172,7 +172,7 @@ class WriteRequest(BaseModel):
 
     id: StrictStr | StrictInt | None = None
     target: str = Field(max_length=64)
-    value: Scalar | list[Scalar]
+    value: Any  # checked against the target by make_op, which names what was expected
     client: str | None = Field(default=None, max_length=128)  # self-declared, for the audit log
 
     @field_validator("target")
@@ -218,8 +218,10 @@ def parse_request(payload: bytes, max_bytes: int) -> ParsedRequest:
         raise CommandRefused(ErrorCode.PAYLOAD_TOO_LARGE,
                              f"request is {len(payload)} bytes; at most {max_bytes} are accepted")
     try:
-        document = json.loads(payload.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        text = payload.decode("utf-8")
+        check_depth(text)
+        document = json.loads(text)
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise CommandRefused(ErrorCode.MALFORMED, f"expected a UTF-8 JSON object or list: {exc}") from None
     is_list = isinstance(document, list)
     elements = document if is_list else [document]
@@ -229,6 +231,29 @@ def parse_request(payload: bytes, max_bytes: int) -> ParsedRequest:
         raise CommandRefused(ErrorCode.MALFORMED,
                              f"{len(elements)} writes in one request; at most {MAX_WRITES_PER_REQUEST}")
     return ParsedRequest(tuple(parse_item(i, e) for i, e in enumerate(elements)), is_list)
+
+
+def check_depth(text: str) -> None:
+    """CommandRefused(malformed) if arrays/objects nest deeper than MAX_JSON_DEPTH (strings skipped)."""
+    depth = 0
+    in_string = escaped = False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            if depth > MAX_JSON_DEPTH:
+                raise CommandRefused(ErrorCode.MALFORMED, f"JSON nested deeper than {MAX_JSON_DEPTH} levels; "
+                                     "a request is an object or a list of objects")
+        elif char in "]}":
+            depth -= 1
 
 
 def parse_item(index: int, element: object) -> RequestItem:
@@ -263,7 +288,4 @@ def _refusal(index: int, exc: ValidationError) -> CommandRefused:
         message = "unknown key (expected id, target, value, client)"
     elif error["type"] == "missing":
         message = "required"
-    elif code is ErrorCode.MALFORMED and loc.startswith("value"):
-        code, message = ErrorCode.WRONG_TYPE, f"expected a number, a boolean or a list of them: {message}"
-        loc = "value"
     return CommandRefused(code, f"write {index}" + (f" {loc}" if loc else "") + f": {message}")

@@ -12,7 +12,7 @@ import asyncio
 import logging
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from edge.collect.plan import MachinePlan
@@ -81,15 +81,16 @@ class CommandService:
         self._counters["requests"] += 1
         machine = self._machine(device_id)
         try:
-            if machine is None:
-                raise CommandRefused(ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured")
-            parsed = parse_request(payload, self.config.write_policy(machine).max_payload_bytes)
+            parsed = parse_request(payload, self.config.writes.max_payload_bytes)
         except CommandRefused as refusal:
             self._record(device_id, source, None, WriteResult.refused(None, refusal))
             await self.publisher.publish_json_reply(device_id, request_error(refusal.code, refusal.message), source)
             return
-        assert machine is not None
-        results = await self._run(machine, list(parsed.items), source)
+        if machine is None:
+            results = self._refuse_all(device_id, parsed.items, source, CommandRefused(
+                ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured"))
+        else:
+            results = await self._run(machine, list(parsed.items), source)
         replies = [reply(item.id, item.target_text, result) for item, result in zip(parsed.items, results,
                                                                                      strict=True)]
         if parsed.is_list:
@@ -97,6 +98,14 @@ class CommandService:
             await self.publisher.publish_json_reply(device_id, replies, source)
         else:
             await self.publisher.publish_json_reply(device_id, replies[0], source)
+
+    def _refuse_all(self, device_id: str, items: Sequence[RequestItem], source: CommandSource,
+                    refusal: CommandRefused) -> list[WriteResult]:
+        """One refusal for every item (each keeps its id and target in the reply), audited."""
+        results = [WriteResult.refused(item.op, refusal) for item in items]
+        for item, result in zip(items, results, strict=True):
+            self._record(device_id, source, item, result)
+        return results
 
     # ---- Sparkplug DCMD --------------------------------------------------------------------------------
     async def on_device_command(self, device_id: str, metric_name: str, value: object,
@@ -110,6 +119,18 @@ class CommandService:
             asyncio.get_running_loop().call_soon(self._start_dcmd, key)
         batch.metrics.append((metric_name, value))
         await batch.done.wait()
+
+    def on_device_command_refused(self, device_id: str, metric: str | None, code: str, reason: str,
+                                  source: CommandSource) -> None:
+        """A DCMD metric the publisher refused (unknown device or metric, read-only, wrong datatype, a
+        number outside its datatype): one audit line and the outcome counters, like any other refusal."""
+        try:
+            error = ErrorCode(code)
+        except ValueError:  # not expected: the publisher names ErrorCode values
+            error = ErrorCode.MALFORMED
+        refusal = CommandRefused(error, reason)
+        item = RequestItem(0, None, None, None, metric, None, refusal)
+        self._record(device_id, source, item, WriteResult.refused(None, refusal))
 
     def _start_dcmd(self, key: tuple[str, str]) -> None:
         batch = self._dcmd.pop(key)
@@ -164,18 +185,21 @@ class CommandService:
                    source: CommandSource) -> list[WriteResult]:
         """Check every item; if all pass, admit (rate limit) and queue them; audit and count each."""
         policy = self.config.write_policy(machine)
-        results = self._check(machine, policy, items)
-        if results is None:
-            ops = [item.op for item in items if item.op is not None]
-            results = await self._queue_and_wait(machine, policy, ops)
+        checked = self._check(machine, policy, items)
+        if isinstance(checked, tuple):
+            results = await self._queue_and_wait(machine, policy, list(checked))
+        else:
+            results = checked
         for item, result in zip(items, results, strict=True):
             self._record(machine.id, source, item, result)
         return results
 
     def _check(self, machine: MachineConfig, policy: WritePolicy,
-               items: Sequence[RequestItem]) -> list[WriteResult] | None:
-        """None if every item may be written; else a result per item (the first refusal, the rest skipped)."""
+               items: Sequence[RequestItem]) -> tuple[WriteOp, ...] | list[WriteResult]:
+        """The ops to write (each marked whether a bound applied) if every item may be written; else a result
+        per item (the first refusal, the rest skipped)."""
         sysinfo = self._sysinfo(machine.id)
+        ops: list[WriteOp] = []
         for index, item in enumerate(items):
             refusal = item.refused
             if refusal is None and self._closing:
@@ -183,14 +207,14 @@ class CommandService:
             if refusal is None:
                 assert item.op is not None
                 try:
-                    authorise(item.op, policy)
+                    ops.append(replace(item.op, bounded=authorise(item.op, policy)))
                     check_limits(item.op.target, sysinfo)
                 except CommandRefused as exc:
                     refusal = exc
             if refusal is not None:
                 return [WriteResult.refused(i.op, refusal) if n == index else WriteResult.skipped(i.op, index)
                         for n, i in enumerate(items)]
-        return None
+        return tuple(ops)
 
     async def _queue_and_wait(self, machine: MachineConfig, policy: WritePolicy,
                               ops: list[WriteOp]) -> list[WriteResult]:

@@ -11,17 +11,15 @@ import math
 from typing import Any
 
 from edge.command.errors import CommandRefused, ErrorCode
-from edge.command.requests import I32, WriteOp, pmc_bytes
+from edge.command.requests import WriteOp, pmc_bytes
+from edge.command.signedness import PARAM_READINGS
 from edge.focas import items as it
 from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.packed import to_scaled
 from edge.focas.session import CncSession
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
-# The value range each parameter type stores (BIT: the whole byte of 8 bits).
 INTEGER_PMC_TYPES = (PmcType.BYTE, PmcType.WORD, PmcType.LONG)
-PARAM_LIMITS = {ParamType.BIT: (0, 255), ParamType.BYTE: (-128, 255), ParamType.WORD: (-32768, 32767),
-                ParamType.TWO_WORD: I32}
 
 
 def read_item(target: WritableTarget) -> it.ReadItem:
@@ -70,15 +68,18 @@ def check_param(op: WriteOp, record: ParamRecord) -> None:
     assert isinstance(value, int | float) and not isinstance(value, bool)
     if record.type == ParamType.REAL:
         return
-    limits = PARAM_LIMITS.get(ParamType(record.type)) if record.type in tuple(ParamType) else None
-    if limits is None:
+    reading = PARAM_READINGS.get(ParamType(record.type)) if record.type in tuple(ParamType) else None
+    if reading is None:
         raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: unknown parameter type {record.type}")
+    kind = f"{target}: parameter {target.first} is {_type_name(record.type)}"
     if float(value) != int(value):
-        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: parameter {target.first} is "
-                             f"{_type_name(record.type)}; {value} is not an integer")
-    if not limits[0] <= int(value) <= limits[1]:
-        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{target}: parameter {target.first} is "
-                             f"{_type_name(record.type)}; {value} is outside {limits[0]}..{limits[1]}")
+        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{kind}; {value} is not an integer")
+    low, high = reading.accepted
+    if not low <= int(value) <= high:
+        raise CommandRefused(ErrorCode.WRONG_TYPE, f"{kind}; {value} is outside {low}..{high}")
+    if op.bounded and reading.is_other(int(value)):
+        raise CommandRefused(ErrorCode.OUT_OF_BOUNDS, f"{kind} ({reading.describe()}); {value} would be held as "
+                             f"{reading.held(int(value))}, and a bounded allow rule takes values in that reading only")
 
 
 def _type_name(ptype: int) -> str:

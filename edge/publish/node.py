@@ -69,6 +69,11 @@ class CommandIgnored:
 
     reason: str
     unknown: bool  # True: name/alias/device not known; False: known but rejected (read-only, bad value)
+    # A refused DCMD metric, for the write audit: the device, the metric (name, or alias=N) and the write
+    # reply code (edge.command.errors) that says why; None for anything that is not a DCMD metric.
+    device_id: str | None = None
+    metric: str | None = None
+    code: str | None = None
 
 
 CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
@@ -445,7 +450,8 @@ class SparkplugNode:
         try:
             p = pl.decode(data)
         except ValueError as exc:
-            return [CommandIgnored(f"{topic}: {exc}", unknown=False)]
+            device = parts[4] if parts[2] == "DCMD" and len(parts) == 5 else None
+            return [CommandIgnored(f"{topic}: {exc}", unknown=False, device_id=device, code="malformed")]
         if parts[2] == "NCMD" and len(parts) == 4:
             return [self._node_command(m) for m in p.metrics]
         if parts[2] == "DCMD" and len(parts) == 5:
@@ -479,18 +485,23 @@ class SparkplugNode:
 
     def _device_command(self, device_id: str, m: Payload.Metric) -> CommandEvent:
         dev = self._devices.get(device_id)
+        described = m.name if m.HasField("name") and m.name else _describe(m)
         if dev is None:
-            return CommandIgnored(f"DCMD for unknown device {device_id!r}", unknown=True)
+            return CommandIgnored(f"DCMD for unknown device {device_id!r}", unknown=True, device_id=device_id,
+                                  metric=described, code="unknown_machine")
         name = self._resolve(device_id, m)
         spec = dev.specs.get(name) if name is not None else None
         if name is None or spec is None:
-            return CommandIgnored(f"DCMD {device_id}: metric {_describe(m)} not in its DBIRTH", unknown=True)
+            return CommandIgnored(f"DCMD {device_id}: metric {_describe(m)} not in its DBIRTH", unknown=True,
+                                  device_id=device_id, metric=described, code="unknown_metric")
         if not spec.writable:
-            return CommandIgnored(f"DCMD {device_id}: metric {name!r} is read-only", unknown=False)
+            return CommandIgnored(f"DCMD {device_id}: metric {name!r} is read-only", unknown=False,
+                                  device_id=device_id, metric=name, code="invalid_target")
         try:
             value = pl.get_value(m, spec.type)
         except ValueError as exc:
-            return CommandIgnored(f"DCMD {device_id} {name}: {exc}", unknown=False)
+            return CommandIgnored(f"DCMD {device_id} {name}: {exc}", unknown=False, device_id=device_id,
+                                  metric=name, code="wrong_type")
         return DeviceCommand(device_id, name, value)
 
 

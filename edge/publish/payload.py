@@ -3,7 +3,8 @@
 The mapping follows Tahu Java, the TCK and Ignition rather than the loose wording of the spec
 (shared/docs/sparkplug.md §1.10): Int8/Int16/Int32/UInt8/UInt16 travel in `int_value`, signed ones
 sign-extended to 32 bits; Int64/UInt64/UInt32/DateTime travel in `long_value`, Int64 as two's complement.
-Decoding is tolerant (UInt32 in either field, sign-extended or plain small ints) because hosts differ.
+Decoding accepts what hosts differ on (any integer type in either field, signed ones sign-extended to
+the field) but never wraps: a number outside its datatype is a ValueError, as a DCMD value must land as sent.
 
 The DATA path is table-driven: one precomputed writer per type appends a metric with a single protobuf call,
 so encoding costs no per-metric branching in Python.
@@ -124,6 +125,45 @@ def _integer_field(metric: Metric) -> int | None:
     return None
 
 
+def _field_signed(metric: Metric) -> int | None:
+    """The integer field read as two's complement of its own width (int_value 32 bits, long_value 64)."""
+    which = metric.WhichOneof("value")
+    if which == "int_value":
+        return _signed(metric.int_value, 32)
+    if which == "long_value":
+        return _signed(metric.long_value, 64)
+    return None
+
+
+def _checked_signed(metric: Metric, mtype: MetricType) -> int:
+    """A signed integer as sent (sign-extended to its field, as Tahu does), refused when out of range.
+
+    A value that does not fit is never wrapped: 70000 for an Int16 would otherwise land as 4464. A form
+    masked to the type's width (0xFFFF for -1) is refused too, as it cannot be told from 65535.
+    """
+    value = _field_signed(metric)
+    if value is None:
+        raise ValueError(f"{mtype.value} metric: expected int_value or long_value, got {metric.WhichOneof('value')}")
+    bits = _SIGNED_BITS[mtype]
+    low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    if not low <= value <= high:
+        raise ValueError(f"{mtype.value} metric: {value} is outside {low}..{high} (a negative value is sent "
+                         "sign-extended to its field)")
+    return value
+
+
+def _checked_unsigned(metric: Metric, mtype: MetricType) -> int:
+    """An unsigned integer within its width; a negative number (or a wider one) is refused."""
+    raw = _integer_field(metric)
+    bits = _UNSIGNED_BITS[mtype]
+    if raw is None or raw >> bits:
+        which = metric.WhichOneof("value")
+        shown = f"{which}={raw}" if raw is None or _field_signed(metric) == raw else f"{_field_signed(metric)}"
+        raise ValueError(f"{mtype.value} metric: expected an unsigned {bits}-bit integer (0..{(1 << bits) - 1}), "
+                         f"got {shown}")
+    return raw
+
+
 def get_value(metric: Metric, mtype: MetricType) -> object:
     """Read a metric's value as `mtype`, accepting the encodings hosts actually send.
 
@@ -133,16 +173,9 @@ def get_value(metric: Metric, mtype: MetricType) -> object:
         return None
     which = metric.WhichOneof("value")
     if mtype in _SIGNED_BITS:
-        raw = _integer_field(metric)
-        if raw is None:
-            raise ValueError(f"{mtype.value} metric: expected int_value or long_value, got {which}")
-        return _signed(raw, _SIGNED_BITS[mtype])
+        return _checked_signed(metric, mtype)
     if mtype in _UNSIGNED_BITS:
-        raw = _integer_field(metric)
-        if raw is None or raw >> _UNSIGNED_BITS[mtype]:
-            raise ValueError(f"{mtype.value} metric: expected an unsigned {_UNSIGNED_BITS[mtype]}-bit "
-                             f"integer, got {which}={raw}")
-        return raw
+        return _checked_unsigned(metric, mtype)
     if mtype is MetricType.DATETIME:
         raw = _integer_field(metric)
         if raw is None:

@@ -90,6 +90,8 @@ class DroppingSpool:
 
 DeviceCommandHandler = Callable[[str, str, object, CommandSource], Awaitable[None]]
 JsonCommandHandler = Callable[[str, bytes, CommandSource], Awaitable[None]]
+# A DCMD metric refused here (unknown device/metric, read-only, bad value): device, metric, code, reason.
+RefusedCommandHandler = Callable[[str, str | None, str, str, CommandSource], None]
 
 
 class Publisher:
@@ -103,6 +105,7 @@ class Publisher:
         self.spool: Spool = spool if spool is not None else DroppingSpool()
         self.on_device_command: DeviceCommandHandler | None = None
         self.on_json_command: JsonCommandHandler | None = None
+        self.on_device_command_refused: RefusedCommandHandler | None = None
         store = StateStore(settings.state_dir)
         self._counters: Counter[str] = Counter()
         self._tasks: set[asyncio.Task[None]] = set()
@@ -435,6 +438,10 @@ class Publisher:
             elif isinstance(event, CommandIgnored):
                 self._counters["unknown_commands" if event.unknown else "rejected_commands"] += 1
                 log.warning("Sparkplug command ignored topic=%s reason=%s", msg.topic, event.reason)
+                refused = self.on_device_command_refused
+                if refused is not None and event.device_id is not None and event.code is not None:
+                    refused(event.device_id, event.metric, event.code, event.reason,
+                            CommandSource("sparkplug", msg.topic))
 
     def _state_message(self, msg: InboundMessage) -> None:
         assert self._host is not None

@@ -204,3 +204,50 @@ def test_console_entry_point_as_a_subprocess(sim: Sim) -> None:
                           capture_output=True, text=True, timeout=60, env=env, cwd=REPO)
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["value"] == sim.state.read_macro(500)
+
+
+def test_write_whose_read_back_differs_exits_1(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    # The CNC owns F (CNC-to-PMC signals): it overwrites F0 at once, so the write does not hold.
+    code, out, err = run_cli(capsys, "write", "--force", sim.address, "pmc:F0=1")
+    assert code == 1
+    assert "pmc:F0=1" in err and "reads back" in err and "not 1" in err
+    assert "ok" not in out
+
+
+def test_write_whose_read_back_differs_exits_1_in_json_too(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run_cli(capsys, "write", "--json", "--force", sim.address, "pmc:F0=1", "macro:513=1")
+    assert code == 1
+    rows = json_lines(out)
+    assert list(rows) == ["pmc:F0=1"] and rows["pmc:F0=1"]["error"]["code"] == "read_back_differs"
+    assert sim.state.read_macro(513) != 1  # stopped at the first failure
+
+
+@pytest.mark.parametrize("assignment", ["pmc:X0=1", "pmc:F1.2=1", "pmc:X10-X11=0,0", "pmc:f0=1"])
+def test_writing_machine_inputs_or_cnc_signals_needs_force(sim: Sim, capsys: pytest.CaptureFixture[str],
+                                                           assignment: str) -> None:
+    before = len(sim.state.writes())
+    with pytest.raises(SystemExit) as info:
+        raise SystemExit(main(["write", sim.address, assignment]))
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--force" in err and ("machine inputs" in err or "CNC-to-PMC" in err)
+    assert len(sim.state.writes()) == before
+
+
+def test_write_that_holds_exits_0(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "write", sim.address, "pmc:R130=-1", "pmc:D2310.word=65535", "macro:514=0.5")
+    assert code == 0, err
+    assert "pmc:R130=-1  ok, reads back 255" in out
+
+
+def test_parameter_value_outside_its_type_is_refused_before_writing(sim: Sim,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    sim.state.set_param_write_enable(True)
+    try:
+        before = len(sim.state.writes("param:"))
+        code, _, err = run_cli(capsys, "write", "--transport", "packed", sim.packed.address, "param:6711=2147483648")
+        assert code == 1
+        assert "two-word" in err and "2147483648" in err and "wrong_type" in err
+        assert len(sim.state.writes("param:")) == before  # nothing reached the CNC (it would land as -2^31)
+    finally:
+        sim.state.set_param_write_enable(False)

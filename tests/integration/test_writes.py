@@ -27,7 +27,8 @@ pytestmark = pytest.mark.integration
 
 TIMEOUTS = "timeouts: {request_s: 0.5, connect_s: 0.5, backoff_initial_s: 0.05, backoff_max_s: 0.2}"
 POLL = ("poll: {periods: {status: 0.25, macros: 0.5, pmc: 0.5, params: 0.5}, part_count: false, "
-        "macros: ['500-510'], pmc: [{range: R100-R139}, {range: R160, data_type: bit}]}")
+        "macros: ['500-510'], pmc: [{range: R100-R139}, {range: R160, data_type: bit}, "
+        "{range: D200-D203, data_type: word}]}")
 WRITES = """
 writes:
   enabled: true
@@ -37,6 +38,8 @@ writes:
   allow:
     - {{target: 'macro:500-509', min: -1000, max: 1000}}
     - {{target: 'pmc:R100-R199'}}
+    - {{target: 'pmc:R300-R309', max: 100}}
+    - {{target: 'pmc:D200-D203'}}
     - {{target: 'param:1825'}}
     - {{target: 'param:1815'}}
 """
@@ -353,3 +356,47 @@ async def test_dcmd_bit_write_sets_one_pmc_bit_and_keeps_the_others(
         assert fleet[0].state.read_pmc_bytes("R", 160, 160) == bytes([0b1000_1001])
         # the admin seed, then exactly one read-modify-write of the byte
         assert writes(fleet[0], "pmc:R160") == [("pmc:R160", bytes([0b1000_0001])), ("pmc:R160", bytes([0b1000_1001]))]
+
+
+def audit_lines(state_dir: Path) -> list[dict[str, Any]]:
+    path = state_dir / "write-audit.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
+
+
+async def test_every_command_gets_an_answer_and_an_audit_line_and_nothing_wraps(
+        mosquitto: Mosquitto, start: Callable[..., Any], tmp_path: Path) -> None:
+    async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+        run = await start(config_text(mosquitto, tmp_path, native("m1", fleet[0].port)), "m1")
+        aliases = run.aliases("m1")
+        audited = len(audit_lines(tmp_path))
+
+        # JSON nested ~1000 levels used to kill the handler: no reply, no audit line.
+        reply = refused(await run.json_write("m1", None, raw=b"[" * 1000 + b"]" * 1000), "malformed")
+        assert "nested" in reply["error"]["message"]
+        reply = refused(await run.json_write("nope", {"id": "q1", "target": "macro:500", "value": 1}),
+                        "unknown_machine")
+        assert reply["id"] == "q1" and reply["target"] == "macro:500"
+        reply = refused(await run.json_write("m1", {"target": "macro:500", "value": "12"}), "wrong_type")
+        assert "expected a number" in reply["error"]["message"]
+        # Bounds hold for the number the CNC would hold: -1 is the byte 255.
+        reply = refused(await run.json_write("m1", {"target": "pmc:R300", "value": -1}), "out_of_bounds")
+        assert "255" in reply["error"]["message"]
+
+        # DCMD refusals by the publisher are audit lines too; 70000 for an Int16 word is refused, not 4464.
+        await run.dcmd("m1", [Payload.Metric(alias=aliases["PMC/D200"], int_value=70000)])
+        await run.dcmd("m1", [Payload.Metric(alias=aliases["PMC/D200"], int_value=(-40000) & 0xFFFFFFFF)])
+        await run.dcmd("m1", [Payload.Metric(alias=987_654, double_value=1.0)])
+        await run.dcmd("m1", [Payload.Metric(name="Status/Run", string_value="START")])
+        await run.dcmd("m1", [Payload.Metric(name="Macro/500", string_value="twelve")])
+        await run.dcmd("ghost", [Payload.Metric(name="Macro/500", double_value=1.0)])
+        await async_wait_for(lambda: len(audit_lines(tmp_path)) >= audited + 10, message="ten audit lines")
+        lines = audit_lines(tmp_path)[audited:]
+        assert [a["outcome"] for a in lines] == [
+            "malformed", "unknown_machine", "wrong_type", "out_of_bounds",
+            "wrong_type", "wrong_type", "unknown_metric", "invalid_target", "wrong_type", "unknown_machine"]
+        assert lines[1]["request_id"] == "q1" and lines[1]["target"] == "macro:500"
+        assert lines[4]["source"] == "sparkplug" and lines[4]["target"] == "PMC/D200" and "70000" in lines[4]["message"]
+        assert lines[9]["machine"] == "ghost"
+        assert run.daemon.commands.counters["outcome/wrong_type"] >= 4
+        await asyncio.sleep(0)
+        assert fleet[0].state.write_log == []

@@ -116,3 +116,28 @@ def test_any_bytes_never_raise_anything_else(payload: bytes) -> None:
         assert exc.code in (ErrorCode.MALFORMED, ErrorCode.PAYLOAD_TOO_LARGE)
         return
     assert parsed.items
+
+
+@pytest.mark.parametrize("depth", [40, 2000, 100_000])
+def test_json_nested_deeper_than_the_limit_is_malformed(depth: int) -> None:
+    # ~1000 levels used to raise RecursionError out of the parser: no reply, no audit line.
+    for payload in (b"[" * depth + b"]" * depth, b'{"value":' * depth + b"1" + b"}" * depth):
+        with pytest.raises(CommandRefused) as malformed:
+            parse_request(payload, 10 * depth + 10)
+        assert malformed.value.code is ErrorCode.MALFORMED
+        assert "nested" in malformed.value.message
+
+
+def test_brackets_inside_strings_do_not_count_as_nesting() -> None:
+    (first,) = parse_request(json.dumps({"id": "[[[[" * 50, "target": "macro:500", "value": 1}).encode(),
+                             4096).items
+    assert first.refused is None and first.id == "[[[[" * 50
+
+
+@pytest.mark.parametrize(("target", "value"), [
+    ("macro:500", "12"), ("macro:500", None), ("pmc:R100", "x"), ("param:1825/1", "1"), ("pmc:R100-R101", ["a", 1]),
+])
+def test_a_number_target_given_something_else_says_expected_a_number(target: str, value: object) -> None:
+    (first,) = parse_request(json.dumps({"target": target, "value": value}).encode(), 4096).items
+    assert first.refused is not None and first.refused.code is ErrorCode.WRONG_TYPE
+    assert "expected a number" in first.refused.message and "boolean" not in first.refused.message

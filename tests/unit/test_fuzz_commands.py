@@ -12,7 +12,7 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
-from edge.command.errors import CommandRefused
+from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import parse_request
 from edge.publish.mqtt import InboundMessage
 from edge.publish.publisher import CommandSource, Publisher
@@ -28,11 +28,13 @@ SPECS = [
 WRITABLE = {s.name: s for s in SPECS if s.writable}
 NCMD = "spBv1.0/plant/NCMD/gw"
 DCMD = "spBv1.0/plant/DCMD/gw/m1"
+REFUSED: list[tuple[Any, ...]] = []  # DCMD metrics the publisher refused in the last run_messages
 
 
 def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[list[tuple[Any, ...]], Publisher]:
     """Feed inbound messages to a publisher (not connected) with a declared device; the handler calls."""
     calls: list[tuple[Any, ...]] = []
+    REFUSED.clear()
 
     async def body() -> Publisher:
         settings = PublishSettings(state_dir=tmp, group_id="plant", edge_node_id="gw", json_prefix="focas")
@@ -46,6 +48,8 @@ def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[l
 
         pub.on_device_command = device_command
         pub.on_json_command = json_command
+        pub.on_device_command_refused = lambda device, metric, code, reason, source: REFUSED.append(
+            (device, metric, code, reason))
         await pub.device_online("m1", SPECS, [])
         for msg in messages:
             (pub._spb_message if fmt == "sparkplug" else pub._json_message)(msg)
@@ -105,6 +109,13 @@ def test_fuzz_structured_sparkplug_commands_reach_the_handler_only_when_valid(
     if topic != DCMD:
         assert not calls
     assert len(calls) <= len(ms)
+    # Every DCMD metric for this node is either a write or an audited refusal with a reply code.
+    codes = {code.value for code in ErrorCode}
+    assert all(code in codes and reason for _, _, code, reason in REFUSED), REFUSED
+    if topic in (DCMD, "spBv1.0/plant/DCMD/gw/m9"):
+        assert len(calls) + len(REFUSED) == len(ms)
+    else:
+        assert not REFUSED
 
 
 @given(st.binary(max_size=200), st.sampled_from([NCMD, DCMD]))

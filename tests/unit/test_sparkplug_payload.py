@@ -96,12 +96,46 @@ def test_uint32_in_long_value_and_int64_twos_complement() -> None:
 
 @given(st.integers(-(2**7), 2**7 - 1))
 def test_tolerant_decoding_of_host_variants(v: int) -> None:
-    # Hosts may send an Int8 sign-extended to 32 or 64 bits, or masked to 8 bits: all decode the same.
-    for field, raw in (("int_value", v & 0xFFFFFFFF), ("long_value", v & 0xFFFFFFFFFFFFFFFF),
-                       ("int_value", v & 0xFF)):
+    # Hosts may send an Int8 sign-extended to 32 bits (int_value) or to 64 bits (long_value): both decode
+    # the same. A form masked to 8 bits is not accepted: 0xFF cannot be told from 255 (see below).
+    for field, raw in (("int_value", v & 0xFFFFFFFF), ("long_value", v & 0xFFFFFFFFFFFFFFFF)):
         m = Payload.Metric()
         setattr(m, field, raw)
         assert pl.get_value(wire_round_trip(m), MetricType.INT8) == v
+
+
+@pytest.mark.parametrize(("mtype", "field", "number"), [
+    (MetricType.INT16, "int_value", 70000),  # would land as 4464
+    (MetricType.INT16, "int_value", -40000),
+    (MetricType.INT16, "long_value", 70000),
+    (MetricType.INT16, "int_value", 40000),  # 0x9C40: a masked -25536 or an out-of-range 40000
+    (MetricType.INT8, "int_value", 200),
+    (MetricType.INT8, "int_value", -129),
+    (MetricType.INT32, "long_value", 2**31),
+    (MetricType.INT32, "long_value", -(2**31) - 1),
+    (MetricType.UINT8, "int_value", -1),
+    (MetricType.UINT16, "int_value", -1),
+    (MetricType.UINT32, "long_value", -1),
+])
+def test_integers_outside_their_datatype_are_refused_never_wrapped(mtype: MetricType, field: str,
+                                                                   number: int) -> None:
+    m = Payload.Metric()
+    setattr(m, field, number & (0xFFFFFFFF if field == "int_value" else 0xFFFFFFFFFFFFFFFF))
+    with pytest.raises(ValueError, match=str(number)):
+        pl.get_value(wire_round_trip(m), mtype)
+
+
+@pytest.mark.parametrize(("mtype", "number"), [
+    (MetricType.INT8, -128), (MetricType.INT8, 127), (MetricType.INT16, -32768), (MetricType.INT16, 32767),
+    (MetricType.INT32, -(2**31)), (MetricType.INT32, 2**31 - 1), (MetricType.INT64, -(2**63)),
+])
+def test_integers_at_their_datatype_limits_decode_in_both_fields(mtype: MetricType, number: int) -> None:
+    for field, mask in (("int_value", 0xFFFFFFFF), ("long_value", 0xFFFFFFFFFFFFFFFF)):
+        if mtype is MetricType.INT64 and field == "int_value":
+            continue
+        m = Payload.Metric()
+        setattr(m, field, number & mask)
+        assert pl.get_value(wire_round_trip(m), mtype) == number
 
 
 def test_uint32_accepted_from_either_field_and_out_of_range_rejected() -> None:
