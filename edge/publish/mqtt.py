@@ -107,6 +107,9 @@ class MqttConnection:
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._batch: list[bytes] = []  # QoS 0 PUBLISH packets of this loop turn, for the watched socket
         self._topics = mqtt_wire.TopicCache(v5=self._v5)
+        if not mqtt_wire.AVAILABLE:
+            log.warning("raw QoS 0 PUBLISH fast path off, paho publishes every message (slower) "
+                        "paho_mqtt=%s problem=%s", mqtt_wire.PAHO_VERSION, mqtt_wire.PROBLEM)
         self.connected = False  # CONNACK accepted and not lost since
         self.connects = 0
 
