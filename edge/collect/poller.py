@@ -463,7 +463,10 @@ class MachinePoller:
             if isinstance(result, FocasError):
                 self.stats.count_error(result)
             return True
+        steps = self.clock.steps
         self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
+        if self.clock.steps != steps:
+            self._log_clock_step()
         using_gateway = self.clock.use_gateway_time
         if using_gateway != self._clock_mode_logged:
             if using_gateway:
@@ -472,6 +475,13 @@ class MachinePoller:
                 log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
             self._clock_mode_logged = using_gateway
         return True
+
+    def _log_clock_step(self) -> None:
+        step = self.clock.last_step_s or 0.0
+        follow = ("stamps slow to half speed until they meet it, never earlier than one already sent" if step < 0
+                  else "stamps follow it at once")
+        log.warning("CNC clock stepped machine=%s step=%+.1fs skew=%.1fs: offset re-synced, %s", self.machine_id,
+                    step, self.clock.skew_s or 0.0, follow)
 
     def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
         skew = self.clock.skew_s
