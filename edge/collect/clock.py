@@ -21,11 +21,11 @@ immune to NTP steps on the gateway itself.
 A reading that contradicts the window by more than STEP_MIN_S is a *step*: the CNC clock was set (by an
 operator, a DST rule, a clock sync at the control). It is counted (`steps`, `last_step_s`, which the poller
 logs once) and the window restarts from that reading (as for any contradiction), so the offset is
-re-synced at once. Stamps, though,
-never jump back: when the offset in use falls (a step back, or a bound moving as the interval narrows),
-the offset stamps use falls at most SLEW_RATE seconds per second, so stamps keep advancing (at half speed)
-until they meet the CNC's new time; a step forward is followed at once. A historian therefore never gets a
-value stamped before one it already has, and a 30 s step back is absorbed in about 60 s.
+re-synced at once. Stamps, though, never jump back: when the offset falls (a step back, or a bound moving
+as the interval narrows), the offset the stamps use falls at most SLEW_RATE seconds per second, so stamps
+keep advancing (at half speed) until they meet the CNC's new time; a step forward is followed at once. A
+historian therefore never gets a value stamped before one it already has, and a 30 s step back is
+absorbed in about 60 s.
 
 The CNC time of any gateway moment is then `m_now + θ`. The skew — CNC minus gateway wall time — is
 published as a metric. Beyond `max_skew_s` (dead clock battery, wrong time zone) the tracker says to
