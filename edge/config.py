@@ -470,6 +470,8 @@ class PollPlan(_Model):
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
     diags: list[NumberedItem] = Field(default_factory=list)
+    # A function dropped after EW_FUNC/EW_NOOPT is tried again this long after (and at every reconnect).
+    retry_dropped: Duration = 600.0
 
     @field_validator("positions")
     @classmethod

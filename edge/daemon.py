@@ -83,6 +83,7 @@ class Daemon:
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.on_device_command_refused = self.commands.on_device_command_refused
+        self.publisher.node_metrics_source = self.node_metrics
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stop = asyncio.Event()
         self._reload_requested = asyncio.Event()

@@ -18,6 +18,15 @@ interval becomes empty (the CNC clock was set, a DST or time-zone jump, or drift
 the window restarts from the newest reading. Using the gateway's monotonic clock keeps the estimate
 immune to NTP steps on the gateway itself.
 
+A reading that contradicts the window by more than STEP_MIN_S is a *step*: the CNC clock was set (by an
+operator, a DST rule, a clock sync at the control). It is counted (`steps`, `last_step_s`, which the poller
+logs once) and the window restarts from that reading (as for any contradiction), so the offset is
+re-synced at once. Stamps, though, never jump back: when the offset falls (a step back, or a bound moving
+as the interval narrows), the offset the stamps use falls at most SLEW_RATE seconds per second, so stamps
+keep advancing (at half speed) until they meet the CNC's new time; a step forward is followed at once. A
+historian therefore never gets a value stamped before one it already has, and a 30 s step back is
+absorbed in about 60 s.
+
 The CNC time of any gateway moment is then `m_now + θ`. The skew — CNC minus gateway wall time — is
 published as a metric. Beyond `max_skew_s` (dead clock battery, wrong time zone) the tracker says to
 use gateway time instead, with the reason, and goes back to CNC time as soon as the skew is within
@@ -34,6 +43,8 @@ from zoneinfo import ZoneInfo
 
 DEFAULT_WINDOW_S = 300.0
 MAX_READINGS = 512
+STEP_MIN_S = 1.0  # a reading this far outside the window's interval is a clock step, not drift or jitter
+SLEW_RATE = 0.5  # seconds the stamping offset may fall per second: stamps advance at least at half speed
 
 
 def cnc_to_utc_seconds(cnc_wall: datetime, zone: ZoneInfo) -> float:
@@ -81,6 +92,9 @@ class ClockTracker:
         self._use_gateway = True
         self._reason: str | None = "no CNC clock reading yet"
         self.restarts = 0
+        self.steps = 0  # CNC clock steps seen (see the module docstring)
+        self.last_step_s: float | None = None  # the latest step's size, seconds (negative: set back)
+        self._stamp: tuple[float, float] | None = None  # (monotonic, offset) of the last CNC-time stamp
 
     # ---- input -------------------------------------------------------------------------------------
     def observe(self, cnc_wall: datetime, gateway_monotonic: float, gateway_wall: float,
@@ -108,8 +122,11 @@ class ClockTracker:
         """As observe(), with the CNC time already converted to epoch seconds (UTC)."""
         base = cnc_epoch_s - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
+        reading = _Reading(base - margin, base + 1.0 + margin, gateway_monotonic, self._count + 1)
+        if self._count and max(reading.lower - self._high, self._low - reading.upper) > STEP_MIN_S:
+            self._stepped(base + 0.5)
         self._count += 1
-        self._add(_Reading(base - margin, base + 1.0 + margin, gateway_monotonic, self._count))
+        self._add(reading)
         self._evict(self._count - MAX_READINGS, gateway_monotonic, self.window_s)
         self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
         if self._low >= self._high:
@@ -122,6 +139,13 @@ class ClockTracker:
         assert offset is not None
         self._skew = gateway_monotonic + offset - gateway_wall
         return self._judge()
+
+    def _stepped(self, new_offset: float) -> None:
+        """The CNC clock was set: count it. The reading contradicts the window, so the restart below keeps
+        only the readings of the new clock: the offset is re-synced with this very reading."""
+        old = self.offset_s
+        self.steps += 1
+        self.last_step_s = new_offset - old if old is not None else None
 
     def _add(self, reading: _Reading) -> None:
         while self._max_lower and self._max_lower[-1].lower <= reading.lower:
@@ -198,7 +222,13 @@ class ClockTracker:
         """The timestamp for a sample taken now: CNC time in UTC ms, or gateway time when told to."""
         offset = self.offset_s
         if self._use_gateway or offset is None:
+            self._stamp = None
             return round(gateway_wall * 1000)
+        last = self._stamp
+        if last is not None and offset < last[1]:  # falling: slew, never stamp before the last stamp
+            floor = last[1] - SLEW_RATE * max(gateway_monotonic - last[0], 0.0)
+            offset = max(offset, floor)
+        self._stamp = (gateway_monotonic, offset)
         return round((gateway_monotonic + offset) * 1000)
 
     def reset(self) -> None:
@@ -208,5 +238,6 @@ class ClockTracker:
         self._min_upper.clear()
         self._low, self._high = float("-inf"), float("inf")
         self._skew = None
+        self._stamp = None
         self._use_gateway = True
         self._reason = "no CNC clock reading yet"

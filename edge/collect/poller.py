@@ -3,8 +3,9 @@
 A tick batches every due group plus the CNC clock into ONE request (one network round trip), turns
 the results into samples stamped with CNC time, and hands what changed to the sink. A failed item
 only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is dropped
-from this machine's plan with one log line. A broken session ends in device_offline, backoff, and
-a fresh birth with the full state on recovery.
+from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and at
+every reconnect, since one transient answer must not end a data stream. A broken session ends in
+device_offline, backoff, and a fresh birth with the full state on recovery.
 """
 
 from __future__ import annotations
@@ -177,7 +178,10 @@ class MachinePoller:
         self._alarms = ActiveAlarmProjection()
         history_store = WatermarkStore(state_dir, machine.id)
         self._history = AlarmHistoryDedup(history_store)
-        self._dropped: set[str] = set()
+        self._dropped: dict[str, float] = {}  # operation -> monotonic time it was dropped (this session)
+        self._retrying: set[str] = set()  # put back in the plan, not answered yet (still listed as dropped)
+        self._warned_dropped: set[str] = set()  # drops already logged at WARNING (once per daemon run)
+        self._full_plan: pl.MachinePlan | None = None  # this session's plan before any drop
         self._plan: pl.MachinePlan | None = None
         self._grid = grid or TickGrid()
         self._batches: dict[frozenset[pl.Group], TickBatch] = {}  # by the groups read in the tick
@@ -267,9 +271,11 @@ class MachinePoller:
     async def _poll_session(self) -> None:
         static = await self._read_static()
         plan = pl.MachinePlan.build(self.machine, self.alarms_config, static)
-        for operation in list(self._dropped) + self._unsupported(plan):
+        for operation in self._unsupported(plan):
             plan = plan.without(operation)
-        self._plan = plan
+        self._full_plan = self._plan = plan
+        self._dropped.clear()  # a new session asks for every function again
+        self._retrying.clear()
         schedule = pl.Schedule(plan.periods)
         schedule.start(time.monotonic())
         schedule.due(time.monotonic())  # static group already read above
@@ -294,6 +300,8 @@ class MachinePoller:
             self.stats.skipped = schedule.skipped
             if not groups:
                 continue
+            if self._dropped:
+                self._retry_dropped(started)
             plan = self._plan or plan
             tick = await self._tick(plan, groups)
             if tick.samples:  # already change-filtered
@@ -408,7 +416,35 @@ class MachinePoller:
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
+        if self._retrying:
+            self._answered_again(batch, results, timestamp, samples)
         return TickResult(samples, events, fresh)
+
+    def _retry_dropped(self, now: float) -> None:
+        """Put functions dropped `poll.retry_dropped` ago back in the plan (listed as dropped until they answer)."""
+        due = [op for op, when in self._dropped.items() if now - when >= self.machine.poll.retry_dropped]
+        if not due or self._full_plan is None:
+            return
+        for operation in due:
+            del self._dropped[operation]
+        self._retrying.update(due)
+        plan = self._full_plan
+        for operation in self._dropped:
+            plan = plan.without(operation)
+        self._plan = plan
+        log.info("retrying dropped functions machine=%s operations=%s", self.machine_id, ",".join(sorted(due)))
+
+    def _answered_again(self, batch: TickBatch, results: Sequence[object], timestamp: int,
+                        samples: list[Sample]) -> None:
+        """A retried function answered: it is no longer listed in Plan/DroppedFunctions."""
+        answered = {read.item.operation for read, result in zip(batch.reads, results, strict=False)
+                    if read.item.operation in self._retrying and not isinstance(result, FocasError)}
+        if not answered:
+            return
+        self._retrying -= answered
+        log.info("dropped function answers again machine=%s operations=%s", self.machine_id,
+                 ",".join(sorted(answered)))
+        samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
 
     def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
         """Feed the tick's clock reading to the tracker; False when it changed nothing about the clock.
@@ -427,7 +463,10 @@ class MachinePoller:
             if isinstance(result, FocasError):
                 self.stats.count_error(result)
             return True
+        steps = self.clock.steps
         self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
+        if self.clock.steps != steps:
+            self._log_clock_step()
         using_gateway = self.clock.use_gateway_time
         if using_gateway != self._clock_mode_logged:
             if using_gateway:
@@ -436,6 +475,13 @@ class MachinePoller:
                 log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
             self._clock_mode_logged = using_gateway
         return True
+
+    def _log_clock_step(self) -> None:
+        step = self.clock.last_step_s or 0.0
+        follow = ("stamps slow to half speed until they meet it, never earlier than one already sent" if step < 0
+                  else "stamps follow it at once")
+        log.warning("CNC clock stepped machine=%s step=%+.1fs skew=%.1fs: offset re-synced, %s", self.machine_id,
+                    step, self.clock.skew_s or 0.0, follow)
 
     def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
         skew = self.clock.skew_s
@@ -454,10 +500,14 @@ class MachinePoller:
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = read.item.operation
             if operation not in self._dropped:
-                self._dropped.add(operation)
+                self._dropped[operation] = time.monotonic()
+                self._retrying.discard(operation)
                 self._plan = self._plan.without(operation)
-                log.warning("dropped from plan machine=%s operation=%s error=%s", self.machine_id,
-                            operation, error)
+                again = operation in self._warned_dropped
+                self._warned_dropped.add(operation)
+                log.log(logging.INFO if again else logging.WARNING,
+                        "dropped from plan machine=%s operation=%s error=%s retry_in=%gs", self.machine_id,
+                        operation, error, self.machine.poll.retry_dropped)
                 samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
         report = self._changes.report
         for spec in read.metrics:
@@ -468,7 +518,8 @@ class MachinePoller:
     def _dropped_sample(self, samples: Sequence[Sample], timestamp: int | None = None) -> Sample:
         when = timestamp if timestamp is not None else (samples[0].timestamp_ms if samples else
                                                         int(time.time() * 1000))
-        return Sample(DROPPED_FUNCTIONS.name, ",".join(sorted(self._dropped)), DROPPED_FUNCTIONS.type, when)
+        listed = ",".join(sorted(self._dropped.keys() | self._retrying))
+        return Sample(DROPPED_FUNCTIONS.name, listed, DROPPED_FUNCTIONS.type, when)
 
     async def _read_active_alarms(self, plan: pl.MachinePlan, timestamp: int,
                                   samples: list[Sample]) -> list[Sample]:

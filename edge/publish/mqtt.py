@@ -39,7 +39,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
-from edge.publish import mqtt_wire
+from edge.publish import connect_failure, mqtt_wire
 from edge.publish.settings import PublishSettings
 
 log = logging.getLogger(__name__)
@@ -104,9 +104,14 @@ class MqttConnection:
         self._attempt = 0  # failed attempts since the last CONNACK
         self._previous_unsent = False  # the previous attempt failed before CONNECT left
         self._will_tag: object = None
+        self._attempt_error: str | None = None  # paho's first error while this attempt awaits its CONNACK
+        self._attempt_reported = False  # this attempt's failure is logged already
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._batch: list[bytes] = []  # QoS 0 PUBLISH packets of this loop turn, for the watched socket
         self._topics = mqtt_wire.TopicCache(v5=self._v5)
+        if not mqtt_wire.AVAILABLE:
+            log.warning("raw QoS 0 PUBLISH fast path off, paho publishes every message (slower) "
+                        "paho_mqtt=%s problem=%s", mqtt_wire.PAHO_VERSION, mqtt_wire.PROBLEM)
         self.connected = False  # CONNACK accepted and not lost since
         self.connects = 0
 
@@ -210,12 +215,17 @@ class MqttConnection:
         self._unwatch()
         client.on_socket_register_write = None  # in the worker, paho writes CONNECT itself
         client.on_socket_unregister_write = None
+        self._attempt_error = None
+        self._attempt_reported = False
+        client.on_log = self._paho_log  # until the CONNACK: paho tells its socket errors only there
         self._connecting = True
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            log.info("MQTT connect failed host=%s port=%s client_id=%s attempt=%d error=%s",
-                     self._settings.host, self._settings.port, self._client_id, self._attempt + 1, exc)
+            # A broker that is down is an outage (INFO); a TLS failure is a configuration to fix (WARNING).
+            tls = connect_failure.is_tls_failure(exc)
+            self._log_attempt_failed(logging.WARNING if tls else logging.INFO,
+                                     "TLS handshake failed" if tls else "connect failed", str(exc))
             return False
         finally:
             self._connecting = False
@@ -226,6 +236,12 @@ class MqttConnection:
         self._previous_unsent = False  # CONNECT left: a later failure is not "unsent"
         self._watch(loop, client, sock)
         return True
+
+    def _log_attempt_failed(self, level: int, what: str, cause: str) -> None:
+        self._attempt_reported = True
+        extra = connect_failure.hint(cause, self._settings)
+        log.log(level, "MQTT %s host=%s port=%s client_id=%s attempt=%d error=%s%s", what, self._settings.host,
+                self._settings.port, self._client_id, self._attempt + 1, cause, f" hint={extra}" if extra else "")
 
     def _watch(self, loop: asyncio.AbstractEventLoop, client: paho.Client, sock: Any) -> None:
         # paho leaves Nagle on: a reply or DATA sent while an earlier packet is unacknowledged would wait
@@ -406,9 +422,11 @@ class MqttConnection:
     def _paho_connect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                       properties: Properties | None) -> None:
         if reason.is_failure:
+            self._attempt_reported = True
             log.warning("MQTT connection refused host=%s port=%s client_id=%s reason=%s",
                         self._settings.host, self._settings.port, self._client_id, reason)
             return  # paho closes the socket; the supervisor retries after the backoff delay
+        client.on_log = None  # formatting every paho log line costs on the publish path
         self._attempt = 0
         # QoS 1 messages of the previous connection would be re-sent by paho now, before our births and
         # with a stale Sparkplug seq; the publisher's spool re-sends their samples instead.
@@ -417,6 +435,10 @@ class MqttConnection:
             log.info("dropped %d unacknowledged message(s) of the previous connection client_id=%s",
                      len(stale), self._client_id)
         self._defer(self._loop_connected, self._will_tag)
+
+    def _paho_log(self, client: paho.Client, userdata: object, level: int, buf: str) -> None:
+        if level == paho.MQTT_LOG_ERR and self._attempt_error is None:
+            self._attempt_error = buf
 
     def _paho_disconnect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                          properties: Properties | None) -> None:
@@ -463,6 +485,11 @@ class MqttConnection:
         self._on_connected(tag)
 
     def _loop_disconnected(self, reason: str) -> None:
+        if not self.connected and not self._attempt_reported and self._client is not None:
+            # Closed between CONNECT and CONNACK: a broker refusing at the TLS layer (no client
+            # certificate) looks like this; say why, as a refused password is said.
+            self._log_attempt_failed(logging.WARNING, "connection closed before CONNACK",
+                                     self._attempt_error or reason)
         if self.connected:
             stopping = self._client is None  # stop() clears it first: a disconnect we asked for
             log.log(logging.INFO if stopping else logging.WARNING,

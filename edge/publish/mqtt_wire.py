@@ -11,7 +11,10 @@ topic (UTF-8); MQTT 5 only: property length 0; payload. No packet identifier at 
 
 from __future__ import annotations
 
+import inspect
+
 import paho.mqtt.client as paho
+from paho import mqtt as paho_package
 
 from edge.publish.ddata import varint
 
@@ -20,8 +23,29 @@ MAX_TOPIC_BYTES = 65_535
 _PUBLISH = 0x30
 _RETAIN = 0x01
 # paho's write queue takes raw packets; command 0 means "no callbacks when written" (not a PUBLISH, not
-# a DISCONNECT). Without the method (a paho we do not know), the fast path is off and paho publishes.
-AVAILABLE = callable(getattr(paho.Client, "_packet_queue", None))
+# a DISCONNECT). This is private API: pyproject.toml pins paho-mqtt to the minor versions it was checked
+# against, tests/unit/test_mqtt_wire.py fails when its shape changes, and a paho without it turns the fast
+# path off with a WARNING (edge.publish.mqtt) rather than failing at the first publish.
+PAHO_VERSION: str = paho_package.__version__
+PRIVATE_QUEUE_PARAMETERS = ("self", "command", "packet", "mid", "qos", "info")
+
+
+def private_api_problem(client_class: type = paho.Client) -> str | None:
+    """What is wrong with paho's private write queue for our use, or None when it has the known shape."""
+    method = getattr(client_class, "_packet_queue", None)
+    if not callable(method):
+        return "paho.Client._packet_queue is missing"
+    try:
+        names = tuple(inspect.signature(method).parameters)
+    except (TypeError, ValueError) as exc:
+        return f"paho.Client._packet_queue has no readable signature ({exc})"
+    if names != PRIVATE_QUEUE_PARAMETERS:
+        return f"paho.Client._packet_queue takes {names}, expected {PRIVATE_QUEUE_PARAMETERS}"
+    return None
+
+
+PROBLEM = private_api_problem()
+AVAILABLE = PROBLEM is None
 
 Prefix = tuple[bytes, bytes]  # (first byte, variable header: topic and, for MQTT 5, property length)
 

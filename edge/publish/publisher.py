@@ -104,6 +104,9 @@ class Publisher:
         self.settings = settings
         self.spool: Spool = spool if spool is not None else DroppingSpool()
         self.on_device_command: DeviceCommandHandler | None = None
+        # The gateway's metrics as of now (the daemon's node_metrics): read again for every NBIRTH, so a
+        # birth states the machines configured and connected at that moment, not the last NDATA's values.
+        self.node_metrics_source: Callable[[], Sequence[Sample]] | None = None
         self.on_json_command: JsonCommandHandler | None = None
         self.on_device_command_refused: RefusedCommandHandler | None = None
         store = StateStore(settings.state_dir)
@@ -416,8 +419,14 @@ class Publisher:
             log.info("waiting for primary host STATE online host=%s", self._host.host_id)
             return
         self._counters["births"] += 1
-        self._send_spb(self._node.births())
+        self._send_spb(self._births())
         self._kick_replay("sparkplug")
+
+    def _births(self) -> list[Outgoing]:
+        """NBIRTH and DBIRTHs, the node metrics refreshed first (not live yet: recorded, not sent)."""
+        if self.node_metrics_source is not None:
+            self._node.set_node_metrics(self.node_metrics_source())
+        return self._node.births()
 
     def _spb_disconnected(self) -> None:
         self._spool_outbox("sparkplug")
@@ -483,7 +492,7 @@ class Publisher:
             return
         self._last_rebirth = time.monotonic()
         self._counters["rebirths"] += 1
-        self._send_spb(self._node.births())
+        self._send_spb(self._births())
         self._kick_replay("sparkplug")
 
     def _cancel_rebirth(self) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import random
 import subprocess
@@ -107,6 +108,41 @@ async def test_tls_without_client_certificate_keeps_retrying(tls_broker: Mosquit
         assert pub.counters["dropped"] == 0 and not pub.connected
     finally:
         await pub.stop()
+
+
+def mqtt_warnings(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name == "edge.publish.mqtt" and r.levelno == logging.WARNING]
+
+
+async def first_tls_warning(broker: Mosquitto, state: Path, ca_file: Path, caplog: pytest.LogCaptureFixture) -> str:
+    """Connect over TLS without a client certificate; the first WARNING the connection logs."""
+    caplog.set_level(logging.INFO, logger="edge.publish.mqtt")
+    pub = Publisher(settings(broker, state, tls=True, tls_ca_file=ca_file, formats=frozenset({"sparkplug"})))
+    await pub.start()
+    try:
+        await async_wait_for(lambda: mqtt_warnings(caplog), timeout=10, message="a WARNING for the failed session")
+    finally:
+        await pub.stop()
+    return mqtt_warnings(caplog)[0]
+
+
+async def test_mutual_tls_rejection_is_a_warning_with_the_cause(tls_broker: Mosquitto, pki: Path, tmp_path: Path,
+                                                                caplog: pytest.LogCaptureFixture) -> None:
+    """The broker wants a client certificate and none is configured: said at WARNING, as a bad password is."""
+    first = await first_tls_warning(tls_broker, tmp_path, pki / "ca.crt", caplog)
+    assert "before CONNACK" in first and f"port={tls_broker.port}" in first, first
+    assert "client certificate" in first and "mqtt.tls.cert_file" in first, first
+
+
+async def test_tls_verification_failure_is_a_warning_with_the_cause(tls_broker: Mosquitto, tmp_path: Path,
+                                                                    caplog: pytest.LogCaptureFixture) -> None:
+    """A CA that did not sign the broker's certificate: a configuration error, not an INFO line."""
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "other.key", "-out", "other.crt",
+            "-days", "2", "-subj", "/CN=other-ca", cwd=tmp_path)
+    first = await first_tls_warning(tls_broker, tmp_path / "state", tmp_path / "other.crt", caplog)
+    assert "TLS handshake failed" in first and "certificate verify failed" in first, first
+    assert "mqtt.tls.ca_file" in first, first
+    assert not [r for r in caplog.records if r.levelno < logging.WARNING and "certificate" in r.getMessage()]
 
 
 async def test_username_password(auth_broker: Mosquitto, tmp_path: Path) -> None:

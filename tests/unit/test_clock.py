@@ -221,3 +221,54 @@ def test_a_steady_poll_observes_few_readings_once_the_offset_is_pinned() -> None
             observed += 1
     assert observed < ticks / 5
     assert abs(tracker.source_time_ms(mono, T0 + mono) / 1000 - (T0 + mono + 7.37)) < 0.02
+
+
+# -- CNC clock steps within the skew limit (issue 16, point 12) -------------------------------------------
+
+def stamps_across_a_step(step: float, before: int = 40,
+                         after: int = 400) -> tuple[ClockTracker, list[tuple[float, int]]]:
+    """(monotonic, stamp) per tick, polled every 0.25 s, the CNC clock stepped by `step` after `before` ticks."""
+    tracker = ClockTracker("UTC", max_skew_s=60)
+    cnc = FakeCnc(0.0)
+    rng = random.Random(3)
+    out = []
+    mono = 0.0
+    for i in range(before + after):
+        if i == before:
+            cnc.offset += step
+        mono += 0.25 + rng.uniform(0, 0.03)
+        tracker.observe(cnc.wall(T0 + mono), mono, T0 + mono)
+        out.append((mono, tracker.source_time_ms(mono, T0 + mono)))
+    return tracker, out
+
+
+def test_backward_step_never_stamps_back_and_meets_the_new_cnc_time() -> None:
+    tracker, stamps = stamps_across_a_step(-30.0)
+    values = [stamp for _, stamp in stamps]
+    assert values == sorted(values), "a stamp earlier than one already given"
+    assert tracker.steps == 1 and tracker.last_step_s == pytest.approx(-30.0, abs=1.0)
+    assert tracker.skew_s == pytest.approx(-30.0, abs=0.6), "the offset itself is re-synced at once"
+    # Stamps advance at half speed until they meet the CNC clock: 30 s absorbed in about 60 s.
+    mono_at_step = stamps[40][0]
+    met = next(m for m, stamp in stamps[40:] if abs(stamp - (T0 + m - 30.0) * 1000) < 600)
+    assert 55 < met - mono_at_step < 66, met - mono_at_step
+    last_mono, last = stamps[-1]
+    assert abs(last - (T0 + last_mono - 30.0) * 1000) < 300, "CNC time again"
+
+
+def test_forward_step_is_followed_at_once() -> None:
+    tracker, stamps = stamps_across_a_step(+30.0, after=20)
+    assert tracker.steps == 1 and tracker.last_step_s == pytest.approx(30.0, abs=1.0)
+    mono, stamp = stamps[41]  # the tick after the step
+    assert abs(stamp - (T0 + mono + 30.0) * 1000) < 600
+    values = [s for _, s in stamps]
+    assert values == sorted(values)
+
+
+def test_drift_and_jitter_are_not_steps() -> None:
+    tracker = ClockTracker("UTC", max_skew_s=600, window_s=10)
+    cnc = FakeCnc(0.0)
+    mono = run(tracker, cnc, ticks=100, period=0.25, jitter=0.05)
+    cnc.offset = 0.5
+    run(tracker, cnc, ticks=100, start=mono, jitter=0.05)
+    assert tracker.restarts >= 1 and tracker.steps == 0
