@@ -38,6 +38,7 @@ from pydantic import (
 
 from edge import ConfigError
 from edge.config_lines import with_lines
+from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.targets import (
@@ -754,11 +755,13 @@ def load_config(path: str | os.PathLike[str], environ: Mapping[str, str] | None 
 def parse_config(text: str, source: str = "config", environ: Mapping[str, str] | None = None) -> Config:
     """Validate config text (YAML); see load_config."""
     environ = os.environ if environ is None else environ
-    data = _parse_yaml(text, source)
+    data, expansion_problems = expand_machines(_parse_yaml(text, source))
     try:
         config = Config.model_validate(data)
+        if expansion_problems:
+            raise ConfigError(with_lines(expansion_problems, text), source)
     except ValidationError as exc:
-        found = format_errors(exc)
+        found = expansion_problems + format_errors(exc)
         found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data), *_machine_cross_checks(data),
                                    *_secret_problems(data, environ))
                   if p not in found]
