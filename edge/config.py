@@ -338,6 +338,7 @@ class PmcRange(_Model):
     range: str | None = None
     start: int | None = Field(default=None, ge=0)
     end: int | None = Field(default=None, ge=0)
+    count: int | None = Field(default=None, ge=1)
     data_type: Literal["bit", "byte", "word", "long", "float", "double"] = "byte"
     name: MetricName | None = None
     deadband: float = Field(default=0.0, ge=0)
@@ -380,12 +381,17 @@ class PmcRange(_Model):
             raise _at("range", "required (e.g. range: R100-R103, or start: and end:)")
         if self.range is None and self.area is None:
             raise _at("area", "required with start/end (one of G F Y X A R T K C D M N E Z)")
+        if self.count is not None and (self.end is not None or "-" in (self.range or "")):
+            raise _at("count", "give count or an end address, not both")
         try:
             self.target  # noqa: B018 - validates the whole-element rule with the data type
             if self.bits and self.deadband:
                 raise ValueError("a deadband means nothing for bits")
         except ValueError as exc:
-            raise _at("range" if self.range is not None else "end", _strip_quote(str(exc))) from None
+            message = _strip_quote(str(exc))
+            if "not a whole number" in message:
+                message += ". " + self._meant()
+            raise _at("range" if self.range is not None else "end", message) from None
         if self.name is not None:
             _wrap_at("name", _folder_ok, self.name)
         return self
@@ -410,9 +416,38 @@ class PmcRange(_Model):
     def pmc_type(self) -> PmcType:
         return PMC_TYPE_NAMES[self.element_type]
 
+    def _byte_span(self) -> PmcTarget:
+        """The range as plain bytes, whatever the data type."""
+        if self.range is not None:
+            return self._parse(self.range, self.area, "byte")
+        assert self.area is not None and self.start is not None
+        last = self.end if self.end is not None else self.start
+        target = parse_target(f"pmc:{self.area}{self.start}-{self.area}{last}.byte")
+        assert isinstance(target, PmcTarget)
+        return target
+
+    def _meant(self) -> str:
+        """What a byte range that is not whole elements was most likely meant to be, written both ways."""
+        span = self._byte_span()
+        width = PMC_TYPE_NAMES[self.element_type].width
+        distance = span.end - span.start
+        aligned = distance % width == 0
+        count = distance // width + 1 if aligned else -(-(distance + 1) // width)
+        kind = self.element_type + ("s" if count != 1 else "")
+        whose = f" whose last starts at {span.area}{span.end}" if aligned else ""
+        first = f"{span.area}{span.start}"
+        return (f"A range is byte addresses: for {count} {kind}{whose} write "
+                f"{first}-{span.area}{span.start + count * width - 1} or {{range: {first}, count: {count}}}")
+
     @property
     def target(self) -> PmcTarget:
         """The range as a PMC target (byte addresses, inclusive)."""
+        if self.count is not None:
+            first = self._byte_span()
+            end = first.start + self.count * PMC_TYPE_NAMES[self.element_type].width - 1
+            counted = parse_target(f"pmc:{first.area}{first.start}-{first.area}{end}.{self.element_type}")
+            assert isinstance(counted, PmcTarget)
+            return counted
         if self.range is not None:
             return self._parse(self.range, self.area, self.element_type)
         assert self.area is not None and self.start is not None
