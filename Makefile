@@ -3,23 +3,31 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
+RUN_STAMP := $(VENV)/.run-stamp
 
-.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check venv
+.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check browser-check venv
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,dev,demo,bench]'
-	@touch $(STAMP)
+	@touch $(STAMP) $(RUN_STAMP)
+
+# What running needs and nothing else (no test, lint or bench tools): the package and the embedded broker.
+$(RUN_STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet -e '.[demo]'
+	@touch $(RUN_STAMP)
 
 venv: $(STAMP)
 
-## make run: a simulated fleet, a broker (system one, or an embedded one), the daemon and a live view
-run: $(STAMP)
-	$(PY) -m edge.demo
+## make run: a simulated fleet, a broker (system one, or an embedded one), the daemon and a compact live view
+## (make run RAW=1, or ARGS=--raw: every message decoded). The demo's state lives in .state/ (untracked).
+run: $(RUN_STAMP)
+	$(PY) -m edge.demo $(if $(RAW),--raw) $(ARGS)
 
 ## make test: lint, then the whole suite (unit + integration with a real mosquitto)
-test: $(STAMP) broker-check lint
+test: $(STAMP) broker-check browser-check lint
 	$(PY) -m pytest -q
 
 lint: $(STAMP)
@@ -29,11 +37,14 @@ lint: $(STAMP)
 unit: $(STAMP)
 	$(PY) -m pytest -q tests/unit
 
-integration: $(STAMP) broker-check
+integration: $(STAMP) broker-check browser-check
 	$(PY) -m pytest -q tests/integration
 
 broker-check:
 	@bash scripts/ensure-mosquitto.sh
+
+browser-check:
+	@bash scripts/ensure-chromium.sh
 
 sim: $(STAMP)
 	$(VENV)/bin/focas-edge sim --machines 3

@@ -37,6 +37,8 @@ from pydantic import (
 )
 
 from edge import ConfigError
+from edge.config_lines import with_lines
+from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.targets import (
@@ -219,10 +221,9 @@ class MqttConfig(_Model):
 
     @model_validator(mode="after")
     def _consistent(self) -> MqttConfig:
-        for key, message in _mqtt_rules(self.formats, self.sparkplug, self.password_env, self.password_file):
+        for key, message in _mqtt_rules(self.formats, self.sparkplug, self.password_env, self.password_file,
+                                        self.username):
             raise _at(key, message)
-        if (self.password_env or self.password_file) and not self.username:
-            raise _at("username", "a password needs a username")
         return self
 
     @property
@@ -231,18 +232,22 @@ class MqttConfig(_Model):
 
     def read_password(self, environ: Mapping[str, str] | None = None) -> str | None:
         """The MQTT password from its environment variable or file; ConfigError if it cannot be had."""
-        environ = os.environ if environ is None else environ
-        if self.password_env:
-            if self.password_env not in environ:
-                raise ConfigError([f"mqtt.password_env: environment variable {self.password_env} is not set"])
-            return environ[self.password_env]
-        if self.password_file:
-            try:
-                return self.password_file.read_text(encoding="utf-8").rstrip("\r\n")
-            except OSError as exc:
-                raise ConfigError([f"mqtt.password_file: cannot read {self.password_file}: {exc.strerror}"]) \
-                    from exc
-        return None
+        return read_secret(self.password_env, self.password_file, environ)
+
+
+def read_secret(password_env: object, password_file: object, environ: Mapping[str, str] | None = None) -> str | None:
+    """The MQTT password from an environment variable or a file; ConfigError naming the key if it cannot be had."""
+    environ = os.environ if environ is None else environ
+    if isinstance(password_env, str) and password_env:
+        if password_env not in environ:
+            raise ConfigError([f"mqtt.password_env: environment variable {password_env} is not set"])
+        return environ[password_env]
+    if isinstance(password_file, str | Path) and str(password_file):
+        try:
+            return Path(password_file).read_text(encoding="utf-8").rstrip("\r\n")
+        except OSError as exc:
+            raise ConfigError([f"mqtt.password_file: cannot read {password_file}: {exc.strerror}"]) from exc
+    return None
 
 
 # ---- poll plan ---------------------------------------------------------------------------------------
@@ -333,6 +338,7 @@ class PmcRange(_Model):
     range: str | None = None
     start: int | None = Field(default=None, ge=0)
     end: int | None = Field(default=None, ge=0)
+    count: int | None = Field(default=None, ge=1)
     data_type: Literal["bit", "byte", "word", "long", "float", "double"] = "byte"
     name: MetricName | None = None
     deadband: float = Field(default=0.0, ge=0)
@@ -375,12 +381,17 @@ class PmcRange(_Model):
             raise _at("range", "required (e.g. range: R100-R103, or start: and end:)")
         if self.range is None and self.area is None:
             raise _at("area", "required with start/end (one of G F Y X A R T K C D M N E Z)")
+        if self.count is not None and (self.end is not None or "-" in (self.range or "")):
+            raise _at("count", "give count or an end address, not both")
         try:
             self.target  # noqa: B018 - validates the whole-element rule with the data type
             if self.bits and self.deadband:
                 raise ValueError("a deadband means nothing for bits")
         except ValueError as exc:
-            raise _at("range" if self.range is not None else "end", _strip_quote(str(exc))) from None
+            message = _strip_quote(str(exc))
+            if "not a whole number" in message:
+                message += ". " + self._meant()
+            raise _at("range" if self.range is not None else "end", message) from None
         if self.name is not None:
             _wrap_at("name", _folder_ok, self.name)
         return self
@@ -405,9 +416,38 @@ class PmcRange(_Model):
     def pmc_type(self) -> PmcType:
         return PMC_TYPE_NAMES[self.element_type]
 
+    def _byte_span(self) -> PmcTarget:
+        """The range as plain bytes, whatever the data type."""
+        if self.range is not None:
+            return self._parse(self.range, self.area, "byte")
+        assert self.area is not None and self.start is not None
+        last = self.end if self.end is not None else self.start
+        target = parse_target(f"pmc:{self.area}{self.start}-{self.area}{last}.byte")
+        assert isinstance(target, PmcTarget)
+        return target
+
+    def _meant(self) -> str:
+        """What a byte range that is not whole elements was most likely meant to be, written both ways."""
+        span = self._byte_span()
+        width = PMC_TYPE_NAMES[self.element_type].width
+        distance = span.end - span.start
+        aligned = distance % width == 0
+        count = distance // width + 1 if aligned else -(-(distance + 1) // width)
+        kind = self.element_type + ("s" if count != 1 else "")
+        whose = f" whose last starts at {span.area}{span.end}" if aligned else ""
+        first = f"{span.area}{span.start}"
+        return (f"A range is byte addresses: for {count} {kind}{whose} write "
+                f"{first}-{span.area}{span.start + count * width - 1} or {{range: {first}, count: {count}}}")
+
     @property
     def target(self) -> PmcTarget:
         """The range as a PMC target (byte addresses, inclusive)."""
+        if self.count is not None:
+            first = self._byte_span()
+            end = first.start + self.count * PMC_TYPE_NAMES[self.element_type].width - 1
+            counted = parse_target(f"pmc:{first.area}{first.start}-{first.area}{end}.{self.element_type}")
+            assert isinstance(counted, PmcTarget)
+            return counted
         if self.range is not None:
             return self._parse(self.range, self.area, self.element_type)
         assert self.area is not None and self.start is not None
@@ -629,14 +669,8 @@ class MachineConfig(_Model):
 
     @model_validator(mode="after")
     def _endpoint(self) -> MachineConfig:
-        if self.transport == "focas" and self.address is not None:
-            raise _at("address", "only for transport packed; the focas transport uses host and port")
-        if self.host is None and self.address is None:
-            raise _at("host", "required" + (" (or address)" if self.transport == "packed" else ""))
-        if self.host is not None and self.address is not None:
-            raise _at("address", "give host/port or address, not both")
-        if self.transport != "focas" and self.max_subpackets is not None:
-            raise _at("max_subpackets", "only for transport focas (the packed surface has no subpackets)")
+        for key, message in _endpoint_rules(self.transport, self.host, self.address, self.max_subpackets):
+            raise _at(key, message)
         return self
 
     @property
@@ -758,20 +792,20 @@ def load_config(path: str | os.PathLike[str], environ: Mapping[str, str] | None 
 def parse_config(text: str, source: str = "config", environ: Mapping[str, str] | None = None) -> Config:
     """Validate config text (YAML); see load_config."""
     environ = os.environ if environ is None else environ
-    data = _parse_yaml(text, source)
+    data, expansion_problems = expand_machines(_parse_yaml(text, source))
     try:
         config = Config.model_validate(data)
+        if expansion_problems:
+            raise ConfigError(with_lines(expansion_problems, text), source)
     except ValidationError as exc:
-        found = format_errors(exc)
-        found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data)) if p not in found]
-        raise ConfigError(found, source) from None
-    problems: list[str] = []
-    try:
-        config.mqtt.read_password(environ)
-    except ConfigError as exc:
-        problems.extend(exc.problems)
+        found = expansion_problems + format_errors(exc)
+        found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data), *_machine_cross_checks(data),
+                                   *_secret_problems(data, environ))
+                  if p not in found]
+        raise ConfigError(with_lines(found, text), source) from None
+    problems = list(_secret_problems(data, environ))
     if problems:
-        raise ConfigError(problems, source)
+        raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
@@ -906,7 +940,7 @@ def _duplicate_ids(data: dict[str, Any]) -> Iterator[str]:
 
 
 def _mqtt_rules(formats: object, sparkplug: object, password_env: object,
-                password_file: object) -> list[tuple[str, str]]:
+                password_file: object, username: object) -> list[tuple[str, str]]:
     """Rules between mqtt keys as (key, message): one source for the model validator and for the raw
     re-check below."""
     rules = []
@@ -914,6 +948,8 @@ def _mqtt_rules(formats: object, sparkplug: object, password_env: object,
         rules.append(("sparkplug", "required (group_id, edge_node_id) when formats includes sparkplug"))
     if password_env and password_file:
         rules.append(("password_file", "give password_env or password_file, not both"))
+    if (password_env or password_file) and not username:
+        rules.append(("username", "a password needs a username"))
     return rules
 
 
@@ -924,8 +960,45 @@ def _mqtt_cross_checks(data: dict[str, Any]) -> Iterator[str]:
     if not isinstance(mqtt, dict):
         return
     for key, message in _mqtt_rules(mqtt.get("formats", list(FORMATS)), mqtt.get("sparkplug"),
-                                    mqtt.get("password_env"), mqtt.get("password_file")):
+                                    mqtt.get("password_env"), mqtt.get("password_file"), mqtt.get("username")):
         yield f"mqtt.{key}: {message}"
+
+
+def _endpoint_rules(transport: object, host: object, address: object,
+                    max_subpackets: object) -> list[tuple[str, str]]:
+    """Rules between a machine's endpoint keys as (key, message), for the model and the raw re-check."""
+    rules = []
+    if transport == "focas" and address is not None:
+        rules.append(("address", "only for transport packed; the focas transport uses host and port"))
+    if host is None and address is None:
+        rules.append(("host", "required" + (" (or address)" if transport == "packed" else "")))
+    if host is not None and address is not None:
+        rules.append(("address", "give host/port or address, not both"))
+    if transport != "focas" and max_subpackets is not None:
+        rules.append(("max_subpackets", "only for transport focas (the packed surface has no subpackets)"))
+    return rules
+
+
+def _machine_cross_checks(data: dict[str, Any]) -> Iterator[str]:
+    """The endpoint rules re-checked on the raw data, for the same reason as _mqtt_cross_checks."""
+    machines = data.get("machines")
+    for index, machine in enumerate(machines if isinstance(machines, list) else []):
+        if isinstance(machine, dict):
+            for key, message in _endpoint_rules(machine.get("transport", "focas"), machine.get("host"),
+                                                machine.get("address"), machine.get("max_subpackets")):
+                yield f"machines[{index}].{key}: {message}"
+
+
+def _secret_problems(data: dict[str, Any], environ: Mapping[str, str]) -> list[str]:
+    """The password cannot be had (read from the raw data, so it shows beside schema errors)."""
+    mqtt = data.get("mqtt")
+    if not isinstance(mqtt, dict):
+        return []
+    try:
+        read_secret(mqtt.get("password_env"), mqtt.get("password_file"), environ)
+    except ConfigError as exc:
+        return exc.problems
+    return []
 
 
 def _strip_quote(message: str) -> str:

@@ -20,6 +20,7 @@ from typing import Any
 
 from edge.config import Config, MachineConfig, load_config
 from edge.daemon import Daemon
+from edge.live_view import LiveView
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.state import CycleSpec
 from edge.watch import Watcher
@@ -78,7 +79,7 @@ async def start_fleet(config: Config) -> tuple[Fleet, Config]:
     return fleet, config.model_copy(update={"machines": machines})
 
 
-async def run_demo(config_path: Path, duration: float | None) -> int:
+async def run_demo(config_path: Path, duration: float | None, raw: bool = False) -> int:
     config = load_config(config_path)
     fleet, config = await start_fleet(config)
     mqtt = config.mqtt
@@ -102,12 +103,15 @@ async def run_demo(config_path: Path, duration: float | None) -> int:
     print(f"== subscribe: mosquitto_sub -h {mqtt.host} -p {port} -t 'spBv1.0/{group}/#' -t '{prefix}/#' -v",
           flush=True)
     print(f"== or:        .venv/bin/focas-edge watch --host {mqtt.host} --port {port}", flush=True)
-    print("== Ctrl-C stops everything", flush=True)
+    print("== Ctrl-C stops everything" + ("" if raw else "; `make run RAW=1` shows every message decoded"),
+          flush=True)
 
-    watcher = Watcher(mqtt.host, port, [f"spBv1.0/{group}/#", f"{prefix}/#"],
-                      printer=lambda line: print(line, flush=True), show_births=False)
-    watcher.start()
     daemon = Daemon(config)
+    view = None if raw else LiveView(daemon)
+    printer = (lambda line: print(line, flush=True)) if view is None else view.on_line
+    watcher = Watcher(mqtt.host, port, [f"spBv1.0/{group}/#", f"{prefix}/#"], printer=printer, show_births=False)
+    watcher.start()
+    drawing = None if view is None else asyncio.create_task(view.run())
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, daemon.request_stop)
@@ -116,6 +120,9 @@ async def run_demo(config_path: Path, duration: float | None) -> int:
     try:
         code = await daemon.run()
     finally:
+        if drawing is not None and view is not None:
+            drawing.cancel()
+            view.draw()
         watcher.stop()
         await fleet.close()
         if broker is not None:
@@ -129,11 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=Path("config/edge.yaml"))
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--log-level", default="WARNING")
+    parser.add_argument("--raw", action="store_true",
+                        help="print every message decoded (the firehose) instead of the compact live view")
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     for noisy in ("amqtt", "transitions"):
         logging.getLogger(noisy).setLevel(logging.ERROR)
-    return asyncio.run(run_demo(args.config, args.duration))
+    return asyncio.run(run_demo(args.config, args.duration, args.raw))
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""The optional local HTTP endpoint: `/healthz` for a load balancer or a probe, `/metrics` for Prometheus.
+"""The optional local HTTP endpoint: `/healthz` for a load balancer or a probe, `/metrics` for Prometheus,
+and a status page for people at `/` (edge.status_page, which polls `/status.json`).
 
 Off by default (`http: {enabled: true}` turns it on; it binds 127.0.0.1:9108 unless told otherwise).
 A tiny HTTP/1.1 server on the daemon's own event loop: a scrape reads the live poller and publisher
@@ -193,6 +194,9 @@ class StatusServer:
         self.requested_port = port
         self.healthy_share = healthy_share
         self.registry = metrics_registry(daemon)
+        from edge.status_page import RateMeter
+
+        self.rates = RateMeter()
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
 
@@ -206,7 +210,8 @@ class StatusServer:
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._serve, self.host, self.requested_port,
                                                   limit=MAX_HEADER_BYTES)
-        log.info("status endpoint listening host=%s port=%d paths=/healthz,/metrics", self.host, self.port)
+        log.info("status endpoint listening host=%s port=%d paths=/,/status.json,/healthz,/metrics", self.host,
+                 self.port)
 
     async def stop(self) -> None:
         server, self._server = self._server, None
@@ -229,7 +234,14 @@ class StatusServer:
             return _json(200 if health.ok else 503, health.document())
         if route == "/metrics":
             return Response(200, CONTENT_TYPE_LATEST, generate_latest(self.registry))
-        return _json(404, {"error": f"no such path {route!r}; expected /healthz or /metrics"})
+        if route in ("/", "/status.json"):
+            from edge.status_page import page_json, render_page, status_document
+
+            doc = status_document(self.daemon, self.rates)
+            if route == "/":
+                return Response(200, "text/html; charset=utf-8", render_page(doc).encode())
+            return Response(200, "application/json", page_json(doc))
+        return _json(404, {"error": f"no such path {route!r}; expected /, /status.json, /healthz or /metrics"})
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()

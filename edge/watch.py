@@ -15,6 +15,8 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
 from edge.publish import payload as spb
+from edge.publish.credentials import apply_credentials
+from edge.publish.settings import PublishSettings
 from edge.samples import MetricType, Quality
 
 Printer = Callable[[str], None]
@@ -25,6 +27,8 @@ def _clock(ms: int) -> str:
 
 
 def _value_text(value: object) -> str:
+    if value is None or value == "":
+        return "(none)"
     if isinstance(value, float):
         return f"{value:.4f}".rstrip("0").rstrip(".") if value == value else "NaN"
     if isinstance(value, str):
@@ -101,7 +105,7 @@ class Watcher:
     """Subscribes to Sparkplug and JSON topics and prints each message as readable lines."""
 
     def __init__(self, host: str, port: int, topics: list[str], printer: Printer = print,
-                 show_births: bool = True) -> None:
+                 show_births: bool = True, credentials: PublishSettings | None = None) -> None:
         self.topics = topics
         self.printer = printer
         self.show_births = show_births
@@ -111,6 +115,8 @@ class Watcher:
         self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"focas-edge-watch-{id(self):x}")
         self.client.on_connect = lambda client, *_: client.subscribe([(t, 0) for t in self.topics])
         self.client.on_message = self._on_message
+        if credentials is not None:
+            apply_credentials(self.client, credentials)
         self.client.reconnect_delay_set(1, 10)
         self.client.connect_async(host, port, keepalive=30)
 

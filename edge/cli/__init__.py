@@ -7,15 +7,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import sys
 
 from edge import __version__
+from edge.logformat import LOG_FORMATS, configure_logging
 
 # Subcommand modules in the order `--help` lists them. Each defines
 #   register(subparsers) -> None   adding its parser with set_defaults(func=handler)
 # where handler(args) -> int returns the exit code.
-SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "watch", "check_config"]
+SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -29,6 +29,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"focas-edge {__version__}")
     parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING or ERROR (default INFO)")
+    parser.add_argument("--log-format", choices=LOG_FORMATS, default="text",
+                        help="text (default) or json: one JSON object per line (ts, level, logger, message, "
+                             "exc) for journald, Loki or ELK")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:
@@ -44,10 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=getattr(logging, str(args.log_level).upper(), logging.INFO),
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
+    configure_logging(args.log_level, args.log_format)
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USAGE

@@ -72,6 +72,7 @@ class PollerStats:
     """Counters the daemon publishes as node metrics and on /metrics."""
 
     ticks: int = 0
+    status_reads: int = 0  # ticks that read the status group (the status page's achieved poll rate)
     overruns: int = 0
     skipped: int = 0
     connects: int = 0
@@ -171,6 +172,8 @@ class MachinePoller:
         self.session = session_factory(machine)
         self.stats = PollerStats()
         self.online = False
+        self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
+        self.last_error = ""  # the last connect, session or read error, for the status page
         self.last_progress = time.monotonic()
         self.clock = ClockTracker(machine.zone, machine.max_skew_s)
         self._jitter_s = jitter_s
@@ -205,6 +208,19 @@ class MachinePoller:
         """This session's plan (metric names, which reads feed them); None before the first connect."""
         return self._plan
 
+    @property
+    def dropped(self) -> list[str]:
+        """Operations this control refused (EW_FUNC/EW_NOOPT/not supported), no longer polled."""
+        return sorted(self._dropped)
+
+    @property
+    def active_alarms(self) -> list[ActiveAlarm]:
+        return self._alarms.active
+
+    def last_values(self) -> dict[str, Sample]:
+        """The last value published for each metric."""
+        return self._changes.last_reported()
+
     def cnc_time_ms(self) -> int:
         """Now, as the CNC's clock says (gateway time while the CNC clock is untrusted)."""
         return self.clock.source_time_ms(time.monotonic(), time.time())
@@ -225,6 +241,7 @@ class MachinePoller:
                 await self._poll_session()
             except FocasError as exc:
                 log.warning("session lost machine=%s error=%s", self.machine_id, exc)
+                self.last_error = f"session lost: {exc}"
             finally:
                 await self._go_offline()
                 await self.session.reset()
@@ -241,6 +258,7 @@ class MachinePoller:
             self.last_progress = time.monotonic()
             error = state.outcome.exception() if state.outcome else None
             delay = state.next_action.sleep if state.next_action else 0.0
+            self.last_error = f"connect failed: {error}"
             log.warning("connect failed machine=%s attempt=%d error=%s retry_in=%.2fs",
                         self.machine_id, state.attempt_number, error, delay)
 
@@ -263,6 +281,7 @@ class MachinePoller:
         if not self.online:
             return
         self.online = False
+        self.online_changed_at = time.time()
         self.stats.disconnects += 1
         with contextlib.suppress(Exception):
             await self.sink.device_offline(self.machine_id)
@@ -288,6 +307,7 @@ class MachinePoller:
         born = [*first.samples, *self._changes.filter(extra)]
         await self.sink.device_online(self.machine_id, specs, born)
         self.online = True
+        self.online_changed_at = time.time()
         self.session_up.set()
         if first.events or first.history:
             await self._emit_events(first.events, first.history)
@@ -376,6 +396,8 @@ class MachinePoller:
         mono_after, wall_after = time.monotonic(), time.time()
         self.last_progress = mono_after
         self.stats.ticks += 1
+        if pl.Group.STATUS in groups:
+            self.stats.status_reads += 1
         self.stats.record_cycle(mono_after - mono_before)
         mid_mono = (mono_before + mono_after) / 2
         mid_wall = (wall_before + wall_after) / 2
@@ -497,6 +519,7 @@ class MachinePoller:
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
         self.stats.count_error(error)
+        self.last_error = f"{read.item.operation}: {error}"
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = read.item.operation
             if operation not in self._dropped:

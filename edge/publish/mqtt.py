@@ -27,7 +27,6 @@ import contextlib
 import logging
 import random
 import socket
-import ssl
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,6 +39,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
+from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
 log = logging.getLogger(__name__)
@@ -136,15 +136,7 @@ class MqttConnection:
         kwargs: dict[str, Any] = {} if self._v5 else {"clean_session": True}
         client = paho.Client(CallbackAPIVersion.VERSION2, client_id=self._client_id, protocol=protocol,
                              reconnect_on_failure=False, **kwargs)
-        if s.username is not None:
-            client.username_pw_set(s.username, s.password)
-        if s.tls:
-            client.tls_set(ca_certs=str(s.tls_ca_file) if s.tls_ca_file else None,
-                           certfile=str(s.tls_cert_file) if s.tls_cert_file else None,
-                           keyfile=str(s.tls_key_file) if s.tls_key_file else None,
-                           cert_reqs=ssl.CERT_REQUIRED)
-            if s.tls_insecure:
-                client.tls_insecure_set(True)
+        apply_credentials(client, s)
         client.connect_timeout = CONNECT_TIMEOUT_S
         client.on_pre_connect = self._paho_pre_connect
         client.on_connect = self._paho_connect

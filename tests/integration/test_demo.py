@@ -1,5 +1,6 @@
-"""`make run` acceptance: `python -m edge.demo` reaches live decoded data within a minute, with no broker
-(an embedded amqtt broker starts) and with one (the suite's mosquitto), and Ctrl-C stops it cleanly."""
+"""`make run` acceptance: `python -m edge.demo` reaches live data within a minute, with no broker (an embedded
+amqtt broker starts) and with one (the suite's mosquitto), and Ctrl-C stops it cleanly. By default it shows the
+compact view (a line per machine, a tail of events); `--raw` shows every message decoded."""
 
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ pytestmark = pytest.mark.integration
 REPO = Path(__file__).resolve().parents[2]
 LIVE_DATA = re.compile(r"^DDATA  \S+/\S+ seq=\d+  \S+ = .+ @\d\d:\d\d:\d\d\.\d{3}$")
 LIVE_JSON = re.compile(r"^JSON   focas/[\w-]+/state/\S+ = .* @\d\d:\d\d:\d\d\.\d{3}$")
+# mill-1   30i-BM   connected  START  O1234  S 6140  parts 0  alarms: none
+MACHINE_LINE = re.compile(r"^(mill-1|lathe-1|mill-2) +(\S+) +connected  (\S+)  O(\S+)  S (\S+)  parts (\S+)  alarms: ")
+EMPTY_VALUE = re.compile(r"= ?$|=  ")  # a value printed as nothing
 
 
 def demo_config(tmp_path: Path, broker_port: int) -> Path:
@@ -38,9 +42,9 @@ class Demo:
         self.proc: asyncio.subprocess.Process | None = None
         self._reader: asyncio.Task[None] | None = None
 
-    async def start(self, config: Path) -> None:
+    async def start(self, config: Path, *flags: str) -> None:
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "edge.demo", "--duration", "90", "--config", str(config),
+            sys.executable, "-m", "edge.demo", "--duration", "90", "--config", str(config), *flags,
             cwd=REPO, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
         self._reader = asyncio.create_task(self._read())
 
@@ -89,23 +93,39 @@ async def reaches_live_data(demo: Demo) -> None:
     assert profiles == {"30i", "16i", "0i-F"}, "three different series"
 
 
+async def shows_the_compact_view(demo: Demo) -> None:
+    """A line per machine with its state and values, and the births in the event tail."""
+    await async_wait_for(lambda: {m.group(1) for line in demo.lines if (m := MACHINE_LINE.match(line))} ==
+                         {"mill-1", "lathe-1", "mill-2"}, 60, message="a connected line for each machine")
+    births = re.compile(r"^\d\d:\d\d:\d\d DBIRTH \S+/(\S+)")
+    await async_wait_for(lambda: len({m.group(1) for line in demo.lines if (m := births.match(line))}) == 3, 30,
+                         message="a DBIRTH for each machine in the event tail")
+    series = {m.group(2) for line in demo.lines if (m := MACHINE_LINE.match(line))}
+    assert series == {"30i-BM", "16i-BM", "0i-FM"}, series
+    assert any(re.match(r"^== 3 of 3 machines connected, broker connected, \d+ messages received", line)
+               for line in demo.lines), demo.text()
+    assert not any(line.startswith(("DDATA", "JSON ")) for line in demo.lines), "no firehose by default"
+
+
 async def test_demo_without_a_broker_starts_an_embedded_one(demo: Demo, tmp_path: Path) -> None:
     port = free_port()
     await demo.start(demo_config(tmp_path, port))
-    await reaches_live_data(demo)
+    await shows_the_compact_view(demo)
     assert any("starting an embedded broker (amqtt) there" in line for line in demo.lines), demo.text()
     assert any(f"-p {port}" in line and "mosquitto_sub" in line for line in demo.lines), "says where to subscribe"
     assert await demo.interrupt() == 0, demo.text()
     assert demo.lines[-1] == "== stopped cleanly", demo.text()
     assert not port_open("127.0.0.1", port), "the embedded broker stops with the demo"
-    assert any(line.startswith("NDEATH") for line in demo.lines), "Ctrl-C ends the Sparkplug session cleanly"
+    assert any("RAW=1" in line for line in demo.lines), "says where the firehose is"
 
 
 async def test_demo_uses_a_broker_that_answers(demo: Demo, mosquitto: Mosquitto, tmp_path: Path) -> None:
-    await demo.start(demo_config(tmp_path, mosquitto.port))
+    await demo.start(demo_config(tmp_path, mosquitto.port), "--raw")
     await reaches_live_data(demo)
+    assert not [line for line in demo.lines if EMPTY_VALUE.search(line)], "empty values show as (none)"
     assert any(f"using the MQTT broker at 127.0.0.1:{mosquitto.port}" in line for line in demo.lines), demo.text()
     assert not any("embedded" in line for line in demo.lines)
     assert await demo.interrupt() == 0, demo.text()
     assert demo.lines[-1] == "== stopped cleanly", demo.text()
     assert mosquitto.running, "the demo leaves a broker it did not start alone"
+    assert any(line.startswith("NDEATH") for line in demo.lines), "Ctrl-C ends the Sparkplug session cleanly"

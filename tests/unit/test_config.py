@@ -83,8 +83,8 @@ def test_every_problem_is_listed_with_its_path() -> None:
                 - {range: R103-R100}
               macros: ["600-599"]
     """)
-    assert "machines[2].poll.pmc[0].range: end 100 before start 103" in problems
-    assert "machines[2].poll.macros[0].last: end 599 before start 600" in problems
+    assert "machines[2].poll.pmc[0].range: end 100 before start 103 (line 16)" in problems
+    assert "machines[2].poll.macros[0].last: end 599 before start 600 (line 17)" in problems
     assert any(p.startswith("machines[2].timezone: unknown IANA time zone 'Mars/Olympus'") for p in problems)
     assert any(p.startswith("mqtt.sparkplug.group_id: 'a+b' contains +") for p in problems)
     assert any(p.startswith("mqtt.colour: unknown key (expected one of: ") for p in problems)
@@ -120,7 +120,7 @@ def test_password_from_environment() -> None:
     config = parse(text, {"MQTT_PASSWORD": "s3cret"})
     assert config.mqtt.read_password({"MQTT_PASSWORD": "s3cret"}) == "s3cret"
     assert "s3cret" not in repr(config)
-    assert problems_of(text, {}) == ["mqtt.password_env: environment variable MQTT_PASSWORD is not set"]
+    assert problems_of(text, {}) == ["mqtt.password_env: environment variable MQTT_PASSWORD is not set (line 5)"]
 
 
 def test_password_from_file(tmp_path: Path) -> None:
@@ -135,18 +135,19 @@ def test_password_from_file(tmp_path: Path) -> None:
 
 def test_password_needs_username_and_only_one_source() -> None:
     assert problems_of(MINIMAL.replace("host: broker", "host: broker\n  password_env: X"), {"X": "1"}) == [
-        "mqtt.username: a password needs a username"]
+        "mqtt.username: a password needs a username (line 2)"]
     both = MINIMAL.replace("host: broker", "host: broker\n  username: u\n  password_env: X\n  password_file: /x")
-    assert problems_of(both, {"X": "1"}) == ["mqtt.password_file: give password_env or password_file, not both"]
+    assert problems_of(both, {"X": "1"}) == [
+        "mqtt.password_file: give password_env or password_file, not both (line 6)"]
 
 
 def test_sparkplug_section_required_for_sparkplug_format() -> None:
     text = "mqtt: {host: b}\nmachines: [{id: m, host: h}]\n"
     assert problems_of(text) == [
-        "mqtt.sparkplug: required (group_id, edge_node_id) when formats includes sparkplug"]
+        "mqtt.sparkplug: required (group_id, edge_node_id) when formats includes sparkplug (line 1)"]
     assert parse("mqtt: {host: b, formats: [json]}\nmachines: [{id: m, host: h}]\n").mqtt.sparkplug is None
     assert problems_of("mqtt: {host: b, formats: []}\nmachines: [{id: m, host: h}]\n") == [
-        "mqtt.formats: at least one of sparkplug, json"]
+        "mqtt.formats: at least one of sparkplug, json (line 1)"]
 
 
 @pytest.mark.parametrize("bad", ["a/b", "a#", "+", ""])
@@ -251,8 +252,8 @@ def test_packed_transport_addresses() -> None:
           - {id: d, transport: serial, host: h}
     """)
     assert any(p.startswith("machines[0].address: expected tcp:HOST:PORT or unix:/PATH") for p in problems)
-    assert "machines[1].address: only for transport packed; the focas transport uses host and port" in problems
-    assert "machines[2].host: required" in problems
+    assert "machines[1].address: only for transport packed; the focas transport uses host and port (line 5)" in problems
+    assert "machines[2].host: required (line 6)" in problems
     assert any(p.startswith("machines[3].transport: ") for p in problems)
 
 
@@ -274,7 +275,7 @@ def test_max_subpackets_reaches_the_client_and_is_checked() -> None:
     """)
     assert any(p.startswith("machines[0].max_subpackets: ") and "2" in p for p in problems), problems
     assert any(p.startswith("machines[1].max_subpackets: ") and "128" in p for p in problems), problems
-    assert ("machines[2].max_subpackets: only for transport focas (the packed surface has no subpackets)"
+    assert ("machines[2].max_subpackets: only for transport focas (the packed surface has no subpackets) (line 6)"
             in problems), problems
 
 
@@ -308,7 +309,7 @@ def test_writes_errors() -> None:
   rate_limit: {max_writes: 0}
 """)
     assert any(p.startswith("writes.allow[0].target: 'diag:980': diag:980 is read-only") for p in problems)
-    assert "writes.allow[1].max: max 1.0 below min 5.0" in problems
+    assert "writes.allow[1].max: max 1.0 below min 5.0 (line 11)" in problems
     assert any(p.startswith("writes.allow[2].target: 'pmc:Q1': unknown PMC area") for p in problems)
     assert any(p.startswith("writes.rate_limit.max_writes: ") for p in problems)
 
@@ -334,7 +335,7 @@ def test_tls_files_must_exist(tmp_path: Path) -> None:
     config = parse(MINIMAL.replace("host: broker", f"host: broker\n  tls: {{ca_file: {ca}}}"))
     assert config.mqtt.tls is not None and config.mqtt.effective_port == 8883
     problems = problems_of(MINIMAL.replace("host: broker", f"host: broker\n  tls: {{key_file: {ca}}}"))
-    assert problems == ["mqtt.tls.key_file: a client key needs cert_file too"]
+    assert problems == ["mqtt.tls.key_file: a client key needs cert_file too (line 4)"]
 
 
 def test_format_path() -> None:
@@ -351,8 +352,10 @@ def test_shipped_examples_are_valid(name: str) -> None:
 def test_tls_example_only_lacks_its_certificate_files() -> None:
     with pytest.raises(ConfigError) as info:
         load_config(REPO / "config" / "tls-broker.yaml", environ={})
-    assert all("no such file" in p for p in info.value.problems)
-    assert len(info.value.problems) == 3
+    problems = info.value.problems
+    assert [p.split(":")[0] for p in problems] == ["mqtt.tls.ca_file", "mqtt.tls.cert_file", "mqtt.tls.key_file",
+                                                   "mqtt.password_file"]
+    assert all("no such file" in p or "No such file" in p for p in problems)
 
 
 def test_unreadable_file_is_a_config_error(tmp_path: Path) -> None:

@@ -37,7 +37,7 @@ def test_data_after_a_birth_prints_names_values_and_cnc_time() -> None:
     decoder = SparkplugDecoder()
     lines = decoder.lines(DBIRTH, birth())
     assert lines[0] == "DBIRTH gw/mill-1 seq=1 (3 metrics)"
-    assert "  Macro/500 = None [BAD] @12:30:45.250" in lines
+    assert "  Macro/500 = (none) [BAD] @12:30:45.250" in lines
     out = decoder.lines(DDATA, data(2, (8, MetricType.DOUBLE, 1234.5), (7, MetricType.STRING, "STOP")))
     assert out == ["DDATA  gw/mill-1 seq=2  Spindle/1/Speed = 1234.5 @12:30:45.250",
                    "DDATA  gw/mill-1 seq=2  Status/Run = STOP @12:30:45.250"]
@@ -84,7 +84,7 @@ def test_json_lines() -> None:
     assert json_lines("focas/mill-1/state/Macro/500", json.dumps(doc).encode()) == \
         ["JSON   focas/mill-1/state/Macro/500 = 12.5 @12:30:45.250"]
     bad = {"value": None, "quality": "BAD", "ts": TS}
-    assert json_lines("focas/m/state/X", json.dumps(bad).encode())[0].endswith("= None [BAD] @12:30:45.250")
+    assert json_lines("focas/m/state/X", json.dumps(bad).encode())[0].endswith("= (none) [BAD] @12:30:45.250")
     assert json_lines("focas/m/online", b"online") == ["JSON   focas/m/online online"]
     long = json.dumps({"event": "raise", "alarms": list(range(200))}).encode()
     (line,) = json_lines("focas/m/events/alarm", long)
@@ -110,7 +110,7 @@ def test_property_every_birth_value_round_trips_into_its_data_line(values: list[
     lines = decoder.lines(DDATA, data(1, *((i + 1, mtype, value) for i, (mtype, value) in enumerate(values))))
     assert len(lines) == len(values)
     for index, ((_, value), line) in enumerate(zip(values, lines, strict=True)):
-        text = str(value)
+        text = str(value) if value != "" else "(none)"
         shown = text if len(text) <= 60 else text[:57] + "..."
         assert line == f"DDATA  gw/mill-1 seq=1  M/{index} = {shown} @12:30:45.250"
 
@@ -119,3 +119,13 @@ def test_property_every_birth_value_round_trips_into_its_data_line(values: list[
 def test_property_decoder_never_raises(raw: bytes, kind: str) -> None:
     lines = SparkplugDecoder().lines(f"spBv1.0/g/{kind}/n/d", raw)
     assert all(isinstance(line, str) for line in lines)
+
+
+def test_an_empty_value_shows_as_none_not_as_nothing() -> None:
+    decoder = SparkplugDecoder()
+    decoder.lines(DBIRTH, birth())
+    out = decoder.lines(DDATA, data(2, (7, MetricType.STRING, "")))
+    assert out == ["DDATA  gw/mill-1 seq=2  Status/Run = (none) @12:30:45.250"]
+    empty = {"value": "", "quality": "GOOD", "ts": TS}
+    assert json_lines("focas/m/state/Program/Comment", json.dumps(empty).encode()) == \
+        ["JSON   focas/m/state/Program/Comment = (none) @12:30:45.250"]

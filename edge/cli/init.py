@@ -1,0 +1,125 @@
+"""`focas-edge init ADDRESS...`: probe each CNC (read-only) and write a config that polls what it answered."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import re
+import socket
+import sys
+from pathlib import Path
+from typing import Any
+
+from edge import ConfigError
+from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+
+DEFAULT_TIMEOUT = 5.0
+DEFAULT_GROUP = "plant"
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    parser = subparsers.add_parser(
+        "init", help="probe CNCs and write a commented config that polls what each answered",
+        description="Probe each CNC read-only (as `probe` does: one request per read function, nothing is "
+                    "written) and write a commented YAML config: a machine per address, each polling what its "
+                    "control answered with data, status periods from the measured round trips, writes off. "
+                    "Check the result with `focas-edge check-config FILE`.",
+        epilog="Exit codes: 0 every CNC probed and the config written, 1 a CNC could not be reached (the config "
+               "is still written for the others, the missing ones as comments; nothing is written when none "
+               "answered), 2 bad usage or an output file that exists (use --force).")
+    parser.add_argument("addresses", nargs="+", metavar="HOST[:PORT]", help="CNC addresses (default port 8193)")
+    parser.add_argument("--names", help="comma-separated machine ids, one per address (default: from the address)")
+    parser.add_argument("--broker", default="localhost", metavar="HOST[:PORT]",
+                        help="MQTT broker for the config (default localhost:1883)")
+    parser.add_argument("--group", default=DEFAULT_GROUP, help=f"Sparkplug group id (default {DEFAULT_GROUP})")
+    parser.add_argument("--node", help="Sparkplug edge node id (default: this host's name)")
+    parser.add_argument("--transport", choices=("focas", "packed"), default="focas",
+                        help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
+    parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                        help=f"connect and per-request timeout (default {DEFAULT_TIMEOUT:g})")
+    parser.add_argument("--output", "-o", default="-", metavar="FILE", help="where to write (default: stdout)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    parser.set_defaults(func=handle)
+
+
+def _usage(message: str) -> int:
+    print(f"focas-edge init: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _ids(args: argparse.Namespace) -> list[str]:
+    """The machine ids, checked; ValueError says what is wrong."""
+    from edge.config import check_sparkplug_id
+    from edge.init_config import machine_id_for
+
+    if args.names is None:
+        ids = [machine_id_for(address) for address in args.addresses]
+    else:
+        ids = [name.strip() for name in args.names.split(",")]
+        if len(ids) != len(args.addresses):
+            raise ValueError(f"--names has {len(ids)} name(s) for {len(args.addresses)} address(es)")
+    for machine_id in ids:
+        check_sparkplug_id(machine_id)
+    lowered = [machine_id.lower() for machine_id in ids]
+    twice = sorted({machine_id for machine_id in ids if lowered.count(machine_id.lower()) > 1})
+    if twice:
+        raise ValueError(f"machine id(s) given twice (ids ignore case): {', '.join(twice)}")
+    return ids
+
+
+def _broker(text: str) -> tuple[str, int]:
+    from edge.focas.connect import parse_address
+
+    parsed = parse_address(text, default_port=1883)
+    return parsed.host, parsed.port
+
+
+async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
+    from edge.focas.connect import open_session, parse_address
+    from edge.init_config import ProbedMachine
+    from edge.probe import probe
+
+    async def one(address: str, machine_id: str) -> ProbedMachine:
+        parsed = parse_address(address, default_port=8193 if args.transport == "focas" else 18193)
+        session: Any = open_session(args.transport, f"{parsed.host}:{parsed.port}", timeout=args.timeout,
+                                    connect_timeout=args.timeout)
+        report = await probe(session, address)
+        return ProbedMachine(machine_id, parsed.host, parsed.port, args.transport, report)
+
+    return list(await asyncio.gather(*(one(a, i) for a, i in zip(args.addresses, ids, strict=True))))
+
+
+def handle(args: argparse.Namespace) -> int:
+    from edge.init_config import render_config
+
+    if args.timeout <= 0:
+        return _usage(f"--timeout must be positive, got {args.timeout:g}")
+    output = None if args.output == "-" else Path(args.output)
+    if output is not None and output.exists() and not args.force:
+        return _usage(f"{output} exists; use --force to overwrite it")
+    try:
+        ids = _ids(args)
+        broker_host, broker_port = _broker(args.broker)
+        node = args.node or re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()) or "gateway"
+        from edge.config import check_sparkplug_id
+
+        check_sparkplug_id(args.group)
+        check_sparkplug_id(node)
+        probed = asyncio.run(_probe_all(args, ids))
+    except (ValueError, ConfigError) as exc:
+        return _usage("; ".join(exc.problems) if isinstance(exc, ConfigError) else str(exc))
+    reached = [m for m in probed if m.report.complete]
+    missed = [(m.report.address, m.report.error) for m in probed if not m.report.complete]
+    for address, reason in missed:
+        print(f"focas-edge init: {address}: {reason}", file=sys.stderr)
+    if not reached:
+        print("focas-edge init: no CNC answered; nothing written", file=sys.stderr)
+        return EXIT_FAILURE
+    text = render_config(reached, missed, broker_host, broker_port, args.group, node)
+    if output is None:
+        sys.stdout.write(text)
+    else:
+        output.write_text(text, encoding="utf-8")
+        print(f"wrote {output}: {len(reached)} machine(s); check it with `focas-edge check-config {output}`",
+              file=sys.stderr)
+    return EXIT_FAILURE if missed else EXIT_OK

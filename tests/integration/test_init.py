@@ -1,0 +1,83 @@
+"""`focas-edge init` against simulated CNCs of every profile: the written config passes check-config and
+polls what each control answered, no more."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main
+from edge.config import load_config
+from edge.sim.fleet import Fleet, FleetThread, MachineSpec
+from edge.sim.profiles import PROFILES
+
+pytestmark = pytest.mark.integration
+
+NAMES = ["mill-0if", "mill-16i", "mill-30i", "lathe-31i", "slow-30i"]
+
+
+def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    specs = [MachineSpec(profile=name) for name in ("0i-F", "16i", "30i")]
+    specs.append(MachineSpec(profile="31i", faults={"ew": {"read_macros": 6, "read_pmc": 1}}))
+    specs.append(MachineSpec(profile="30i", faults={"latency": 0.03}))
+    assert {spec.profile for spec in specs} == set(PROFILES)
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet(specs, base_port=0)) as fleet:
+        addresses = [f"127.0.0.1:{machine.port}" for machine in fleet]
+        code = main(["init", *addresses, "--names", ",".join(NAMES), "--broker", "mqtt.plant:1884",
+                     "--node", "gw-7", "-o", str(out)])
+    assert code == EXIT_OK, capsys.readouterr().err
+    capsys.readouterr()
+    assert main(["check-config", str(out)]) == EXIT_OK, capsys.readouterr()
+    config = load_config(out, environ={})
+    assert (config.mqtt.host, config.mqtt.effective_port) == ("mqtt.plant", 1884)
+    assert config.mqtt.sparkplug is not None and config.mqtt.sparkplug.edge_node_id == "gw-7"
+    assert not config.writes.enabled
+    assert [m.id for m in config.machines] == NAMES
+    assert [m.series for m in config.machines] == ["0i-FM", "16i-BM", "30i-BM", "31i-BT", "30i-BM"]
+    for machine in config.machines[:3]:
+        poll = machine.poll
+        assert poll.positions == ["absolute", "machine"] and poll.part_count
+        assert [list(m.numbers) for m in poll.macros] == [[500, 501, 502, 503, 504, 505]]
+        assert [p.range for p in poll.pmc] == ["F0-F3"]
+        assert poll.periods.status == 0.5 and poll.periods.params == 60.0  # measured; the rest from defaults
+    lathe = config.machines[3].poll
+    assert lathe.macros == [] and lathe.pmc == [], "functions the control refused are left out"
+    assert config.machines[4].poll.periods.status > 0.5, "a slow control is polled less often"
+    text = out.read_text()
+    assert "# macros: #500..#505 did not answer" in text
+    assert yaml.safe_load(text)["writes"] == {"enabled": False}
+
+
+def test_an_unreachable_cnc_is_a_comment_and_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet([MachineSpec(profile="16i")], base_port=0)) as fleet:
+        code = main(["init", f"127.0.0.1:{fleet[0].port}", "127.0.0.1:1", "--timeout", "2", "-o", str(out)])
+    assert code == EXIT_FAILURE
+    assert "127.0.0.1:1: connect" in capsys.readouterr().err
+    text = out.read_text()
+    assert "# NOT REACHED 127.0.0.1:1" in text
+    assert [m.id for m in load_config(out, environ={}).machines] == [f"cnc-127-0-0-1-{fleet[0].port}"]
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--names", "a"], "--names has 1 name(s) for 2 address(es)"),
+    (["--names", "a,A"], "machine id(s) given twice (ids ignore case): A, a"),
+    (["--names", "a,b/c"], "'b/c' contains /"),
+    (["--group", "x#"], "'x#' contains #"),
+])
+def test_bad_usage_is_refused_before_anything_is_probed(extra: list[str], message: str, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["init", "127.0.0.1:1", "127.0.0.1:2", *extra, "-o", str(tmp_path / "x.yaml")]) == EXIT_USAGE
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_an_existing_file_is_not_overwritten_without_force(tmp_path: Path) -> None:
+    out = tmp_path / "edge.yaml"
+    out.write_text("mine\n")
+    assert main(["init", "127.0.0.1:1", "-o", str(out)]) == EXIT_USAGE
+    assert out.read_text() == "mine\n"
