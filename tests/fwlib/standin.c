@@ -291,7 +291,7 @@ void standin_drop_handles(void) {
     for (int i = 0; i < MAX_HANDLES; i++) handles_valid[i] = 0;
     pthread_mutex_unlock(&lock);
 }
-/* Push an alarm (the newest first); len < 0 means strlen(msg). Dates are stored as given, even bad ones. */
+/* Push an alarm (the newest first); len -1 means strlen(msg), any other value is stored as given. Dates are stored as given, even bad ones. */
 void standin_push_alarm(short year, short month, short day, short hour, short minute, short second,
                         short axis_no, short alm_grp, short alm_no, const char *msg, short len) {
     pthread_mutex_lock(&lock);
@@ -302,7 +302,7 @@ void standin_push_alarm(short year, short month, short day, short hour, short mi
     e->axis_no = axis_no; e->alm_grp = alm_grp; e->alm_no = alm_no;
     memset(e->msg, 0, sizeof(e->msg));
     strncpy(e->msg, msg, 64);
-    e->len = len < 0 ? (short)strlen(e->msg) : len;
+    e->len = len == -1 ? (short)strlen(e->msg) : len;
     n_history++;
     pthread_mutex_unlock(&lock);
 }
