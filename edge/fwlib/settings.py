@@ -73,6 +73,17 @@ class HostSettings(BaseModel):
     allow_remote: bool = False
     machines: list[HostMachine] = Field(min_length=1)
 
+    @field_validator("socket_mode", mode="before")
+    @classmethod
+    def _octal_text(cls, value: object) -> object:
+        """`0o600` or `"600"` in YAML: a file mode is octal however it is written."""
+        if isinstance(value, str):
+            try:
+                return int(value.removeprefix("0o"), 8)
+            except ValueError:
+                raise ValueError(f"expected an octal file mode such as 0o600, got {value!r}") from None
+        return value
+
     def timeouts(self) -> WorkerTimeouts:
         return WorkerTimeouts(self.call_timeout_s, self.connect_timeout_s, self.backoff_initial_s,
                               self.backoff_max_s)
