@@ -598,6 +598,9 @@ class MachineConfig(_Model):
     port: int = Field(default=NATIVE_PORT, ge=1, le=65535)
     transport: Literal["focas", "packed"] = "focas"
     address: str | None = None
+    # A FOCAS library host (focas-edge fwlib-host) beside the native connection: alarm history and parameter
+    # writes go there, every other function stays native (edge.focas.routed).
+    fwlib_host: str | None = None
     series: str | None = None
     timezone: str = "UTC"
     timeouts: Timeouts = Field(default_factory=Timeouts)
@@ -618,7 +621,7 @@ class MachineConfig(_Model):
                 from None
         return value
 
-    @field_validator("address")
+    @field_validator("address", "fwlib_host")
     @classmethod
     def _address(cls, value: str | None) -> str | None:
         if value is not None and not _PACKED_ADDRESS_RE.fullmatch(value):
@@ -633,6 +636,9 @@ class MachineConfig(_Model):
             raise _at("host", "required" + (" (or address)" if self.transport == "packed" else ""))
         if self.host is not None and self.address is not None:
             raise _at("address", "give host/port or address, not both")
+        if self.transport != "focas" and self.fwlib_host is not None:
+            raise _at("fwlib_host", "only beside the native transport (focas); with transport packed, address "
+                                    "already names the library host")
         if self.transport != "focas" and self.max_subpackets is not None:
             raise _at("max_subpackets", "only for transport focas (the packed surface has no subpackets)")
         return self
@@ -771,6 +777,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     if problems:
         raise ConfigError(problems, source)
     config._warnings.extend(_clamp_warnings(data))
+    config._warnings.extend(_history_route_warnings(config))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
@@ -884,6 +891,22 @@ def _clamp_warnings(data: dict[str, Any]) -> list[str]:
             warnings.append(f"{path}.history_depth: {depth} is outside {HISTORY_DEPTH_MIN}.."
                             f"{HISTORY_DEPTH_MAX} (the CNC ring holds at most {HISTORY_DEPTH_MAX}); "
                             f"using {clamped}")
+    return warnings
+
+
+def _history_route_warnings(config: Config) -> list[str]:
+    """ActivePlusHistory on a native-only machine: the wire has no public alarm-history code (docs/protocol.md)."""
+    warnings = []
+    for index, machine in enumerate(config.machines):
+        if config.alarms_for(machine).mode != "ActivePlusHistory":
+            continue
+        if machine.transport == "focas" and machine.fwlib_host is None:
+            warnings.append(
+                f"machines[{index}] ({machine.id}): alarms mode ActivePlusHistory on the native transport alone: "
+                f"the CNC's alarm history will NOT be published (no public wire code for cnc_rdalmhistry; "
+                f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
+                f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
+                f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
     return warnings
 
 

@@ -25,7 +25,7 @@ from datetime import datetime
 from itertools import compress
 from operator import is_not
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
@@ -152,10 +152,10 @@ SessionFactory = Callable[[MachineConfig], CncSession]
 
 def default_session(machine: MachineConfig) -> CncSession:
     timeouts = machine.timeouts
-    extra = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
-    return open_session(machine.transport, machine.endpoint, timeout=timeouts.request_s,
-                        connect_timeout=timeouts.connect_s, backoff_initial=timeouts.backoff_initial_s,
-                        backoff_max=timeouts.backoff_max_s, **extra)
+    extra: dict[str, Any] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
+    return open_session(machine.transport, machine.endpoint, fwlib_host=machine.fwlib_host,
+                        timeout=timeouts.request_s, connect_timeout=timeouts.connect_s,
+                        backoff_initial=timeouts.backoff_initial_s, backoff_max=timeouts.backoff_max_s, **extra)
 
 
 class MachinePoller:
@@ -325,11 +325,14 @@ class MachinePoller:
         return out
 
     def _unsupported(self, plan: pl.MachinePlan) -> list[str]:
+        """Planned reads this machine's transport cannot do: warned once, and listed in Plan/DroppedFunctions."""
         capabilities = self.session.capabilities
         missing = sorted({r.item.operation for r in plan.reads if not capabilities.can(r.item.operation)})
         for operation in missing:
-            log.info("not polled machine=%s operation=%s reason=not supported by the %s transport",
-                     self.machine_id, operation, capabilities.transport)
+            if operation not in self._dropped:
+                log.warning("not polled machine=%s operation=%s reason=not supported by the %s transport",
+                            self.machine_id, operation, capabilities.transport)
+            self._dropped.add(operation)
         return missing
 
     def _batch_for(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickBatch:
