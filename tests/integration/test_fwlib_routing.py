@@ -1,0 +1,97 @@
+"""Per-function routing end to end: one machine, native FOCAS/Ethernet plus a library host (fwlib_host).
+
+The simulator's packed server stands in for `focas-edge fwlib-host` (same surface, same machine state):
+fast polls must stay on the native connection, while the alarm history and parameter writes go to the
+library host. Its request log shows which functions reached it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+
+from edge.config import parse_config
+from edge.daemon import Daemon
+from edge.focas import packed as pk
+from edge.sim.fleet import Fleet, MachineSpec
+from tests.helpers import Mosquitto, async_wait_for
+from tests.integration.daemon_config import daemon_config
+from tests.integration.mqtt_observer import Observer, metrics_by_name
+
+pytestmark = pytest.mark.integration
+
+TIMEOUTS = "timeouts: {request_s: 1, connect_s: 1, backoff_initial_s: 0.05, backoff_max_s: 0.3}"
+EXTRA = """
+alarms: {mode: ActivePlusHistory, history_interval: 0.5s}
+writes:
+  enabled: true
+  allow:
+    - {target: 'param:1825'}
+"""
+
+
+@pytest.fixture
+async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
+    obs = Observer(mosquitto)
+    yield obs
+    obs.close()
+
+
+async def test_history_and_parameter_writes_go_to_the_library_host_fast_polls_stay_native(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    async with Fleet([MachineSpec(profile="30i", param_write_enabled=True)], base_port=0,
+                     packed_base_port=0) as fleet:
+        sim = fleet[0]
+        ring = len(sim.state.alarm_events())
+        machine = (f"  - {{id: m1, host: 127.0.0.1, port: {sim.port}, "
+                   f"fwlib_host: 'tcp:127.0.0.1:{sim.packed_port}', {TIMEOUTS}, "
+                   f"poll: {{periods: {{status: 0.25, params: 0.5}}, params: [{{number: 1825, axis: 1}}]}}}}\n")
+        config = parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA))
+        assert config.warnings == []
+        daemon = Daemon(config)
+        task = asyncio.create_task(daemon.run())
+        try:
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+
+            def history() -> list[object]:
+                docs = [json.loads(m.payload) for m in observer.on("focas/m1/events/alarm")]
+                return [d for d in docs if d["name"] == "Alarm/History"]
+
+            await async_wait_for(lambda: len(history()) >= ring, timeout=15, message="history via the library host")
+
+            await observer.publish("focas/m1/cmd", json.dumps({"target": "param:1825/1", "value": 2700}).encode())
+            [reply] = await observer.wait_topic("focas/m1/cmd/reply", count=1, timeout=15)
+            assert json.loads(reply.payload)["value_read_back"] == 2700, reply.payload
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 15) == 0
+
+        packed_commands = {r.command for r in sim.packed.requests}
+        assert pk.Command.RDALMHISTRY in packed_commands
+        assert pk.Command.WRPARAM in packed_commands
+        # Nothing the native side has went to the library host: no status, clock, parameter read, alarm poll.
+        assert packed_commands <= {pk.Command.SYSINFO, pk.Command.RDALMHISTRY, pk.Command.WRPARAM}
+        assert [w.protocol for w in sim.state.writes("param:1825")] == ["packed"]
+        birth = metrics_by_name(observer.on("spBv1.0/plant/DBIRTH/gw/m1")[0].spb())
+        assert "ReadAlarmHistory" not in birth["Plan/DroppedFunctions"].string_value
+
+
+async def test_without_a_library_host_the_history_read_is_listed_as_dropped(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+        machine = f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, {TIMEOUTS}}}\n"
+        config = parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA))
+        assert any("ActivePlusHistory on the native transport alone" in w for w in config.warnings)
+        daemon = Daemon(config)
+        task = asyncio.create_task(daemon.run())
+        try:
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 15) == 0
+    birth = metrics_by_name(observer.on("spBv1.0/plant/DBIRTH/gw/m1")[0].spb())
+    assert "ReadAlarmHistory" in birth["Plan/DroppedFunctions"].string_value.split(",")
