@@ -14,10 +14,11 @@ from pathlib import Path
 
 import pytest
 
+from edge.cli import EXIT_OK, main
 from edge.config import parse_config
 from edge.daemon import Daemon
 from edge.focas import packed as pk
-from edge.sim.fleet import Fleet, MachineSpec
+from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer, metrics_by_name
@@ -95,3 +96,22 @@ async def test_without_a_library_host_the_history_read_is_listed_as_dropped(
             assert await asyncio.wait_for(task, 15) == 0
     birth = metrics_by_name(observer.on("spBv1.0/plant/DBIRTH/gw/m1")[0].spb())
     assert "ReadAlarmHistory" in birth["Plan/DroppedFunctions"].string_value.split(",")
+
+
+def test_probe_shows_which_transport_answers_each_function(capsys: pytest.CaptureFixture[str]) -> None:
+    with FleetThread(Fleet([MachineSpec(profile="30i")], base_port=0, packed_base_port=0)) as fleet:
+        args = ["probe", f"127.0.0.1:{fleet[0].port}", "--fwlib-host", f"tcp:127.0.0.1:{fleet[0].packed_port}",
+                "--timeout", "2"]
+        assert main([*args, "--json"]) == EXIT_OK
+        doc = json.loads(capsys.readouterr().out)
+        assert main(args) == EXIT_OK
+        table = capsys.readouterr().out
+    functions = {f["function"]: f for f in doc["functions"]}
+    assert functions["ReadAlarmHistory"]["via"] == "fwlib-host"
+    assert functions["ReadAlarmHistory"]["outcome"] == "ok"
+    assert functions["ReadStatus"]["via"] == "native" and functions["ReadSpindleLoad"]["via"] == "native"
+    writes = {w["operation"]: w for w in doc["writes"]}
+    assert writes["write_param"]["via"] == "fwlib-host" and writes["write_param"]["transport_has_it"]
+    assert writes["write_macro"]["via"] == "native"
+    history = [line for line in table.splitlines() if line.strip().startswith("ReadAlarmHistory")]
+    assert history and "[fwlib-host]" in history[0]
