@@ -133,7 +133,7 @@ def load_library(path: str) -> FocasLibrary:
         built_for = elf_architecture(path)
         hint = ""
         if built_for is not None:
-            hint = (f"; the file is built for {built_for} but this Python is {python_architecture()} "
-                    f"(run the host under a Python of the library's architecture, docs/install.md)")
+            hint = (f"; the file is built for {built_for}; this Python is {python_architecture()} "
+                    f"(the host must run under a Python of the library's architecture, docs/install.md §6)")
         raise LibraryLoadError(f"FOCAS library {path} could not be loaded: {exc}{hint}") from None
     return FocasLibrary(path, lib)

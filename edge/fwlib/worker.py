@@ -85,6 +85,11 @@ class CallThread:
             self._jobs.put((last, None, None))
         self._jobs.put(None)
 
+    def join(self, timeout: float) -> bool:
+        """Wait (blocking) for the thread to end; False if a call is still blocked after `timeout`."""
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
+
     def _run(self) -> None:
         while (job := self._jobs.get()) is not None:
             call, loop, future = job
@@ -128,12 +133,15 @@ class HandleWorker:
             if not self.available:
                 self.start()
 
-    async def close(self) -> None:
+    async def close(self, join_timeout_s: float = 5.0) -> None:
+        """Stop reconnecting and free the handle on its thread (waiting for that, unless a call is blocked)."""
         if self._connector is not None:
             self._connector.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._connector
-        self._drop("host stopping")
+        thread = self._drop("host stopping")
+        if thread is not None and not await asyncio.to_thread(thread.join, join_timeout_s):
+            log.warning("a FOCAS library call is still blocked at shutdown machine=%s", self.target.name)
 
     async def respond(self, command: int, payload: bytes) -> bytes:
         async with self._lock:  # one call at a time per handle, each with its own timeout
@@ -156,7 +164,8 @@ class HandleWorker:
                 self.start()
             return reply
 
-    def _drop(self, reason: str) -> None:
+    def _drop(self, reason: str) -> CallThread | None:
+        """Forget the handle and its thread; the thread frees the handle once its current call returns."""
         cnc, thread = self._cnc, self._thread
         self._cnc = self._thread = None
         if thread is not None:
@@ -164,6 +173,7 @@ class HandleWorker:
             thread.retire((lambda: library.call("cnc_freelibhndl", cnc.handle)) if cnc is not None else None)
         if cnc is not None:
             log.info("CNC handle released machine=%s reason=%s", self.target.name, reason)
+        return thread
 
     async def _connect(self) -> None:
         def before_sleep(state: RetryCallState) -> None:

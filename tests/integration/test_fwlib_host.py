@@ -328,3 +328,39 @@ def test_a_non_loopback_tcp_listen_is_refused_without_allow_remote(tmp_path: Pat
     config.write_text("library: /x.so\nmachines:\n  - {name: m1, cnc: 10.0.0.1, listen: 'tcp:0.0.0.0:18193'}\n")
     result = run_cli("--config", str(config))
     assert result.returncode == 2 and "not loopback" in result.stderr
+
+
+def test_the_command_serves_until_sigterm_and_exits_0(standin: Standin, tmp_path: Path) -> None:
+    config = tmp_path / "fwlib-host.yaml"
+    config.write_text(f"library: {standin_library()}\nlog_file: {tmp_path}/focas.log\nsocket_mode: 0o600\n"
+                      f"machines:\n  - {{name: m1, cnc: 10.0.0.1, listen: 'unix:{tmp_path}/m1.sock'}}\n")
+    proc = subprocess.Popen([sys.executable, "-m", "edge", "fwlib-host", "--config", str(config)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = [proc.stdout.readline(), proc.stdout.readline()]
+        assert lines[0].startswith("m1") and f"unix:{tmp_path}/m1.sock" in lines[0]
+        assert lines[1].startswith("ready")
+
+        async def read_sysinfo() -> str:
+            async with PackedClient(f"unix:{tmp_path}/m1.sock", timeout=5.0, connect_timeout=5.0) as cnc:
+                return (await cnc.read_sysinfo()).series
+
+        async def when_open() -> str:
+            deadline = time.monotonic() + 10
+            while True:  # the handle opens in the background: sysinfo answers EW_SOCKET until then
+                try:
+                    return await read_sysinfo()
+                except CncError:
+                    if time.monotonic() > deadline:
+                        raise
+                    await asyncio.sleep(0.05)
+
+        assert asyncio.run(when_open()) == "G421"
+        proc.terminate()
+        assert proc.wait(timeout=20) == 0
+        assert not (tmp_path / "m1.sock").exists()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
