@@ -42,16 +42,8 @@ def handle(args: argparse.Namespace) -> int:
         settings = load_settings(args.config)
         if args.library:
             settings = settings.model_copy(update={"library": args.library})
-        library = load_library(settings.library)
-    except ConfigError as exc:
-        print(f"focas-edge fwlib-host: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except LibraryLoadError as exc:
-        print(f"focas-edge fwlib-host: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        return asyncio.run(serve(settings, library))
-    except LibraryLoadError as exc:
+        return asyncio.run(serve(settings, load_library(settings.library)))
+    except (ConfigError, LibraryLoadError) as exc:
         print(f"focas-edge fwlib-host: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:

@@ -84,6 +84,13 @@ typedef struct odbahis4 {
 
 /* ---- layouts as this compiler lays them out ------------------------------------------------------ */
 #define L(T, name, member) {#T, name, offsetof(T, member), sizeof(((T *)0)->member)}
+/* the ten fields every ODBAHISn entry starts with */
+#define ALMHIS_HEAD(T)                                                                                  \
+    L(T, "alm_his.alm_grp", alm_his[0].alm_grp), L(T, "alm_his.alm_no", alm_his[0].alm_no),           \
+    L(T, "alm_his.axis_no", alm_his[0].axis_no), L(T, "alm_his.year", alm_his[0].year),               \
+    L(T, "alm_his.month", alm_his[0].month), L(T, "alm_his.day", alm_his[0].day),                     \
+    L(T, "alm_his.hour", alm_his[0].hour), L(T, "alm_his.minute", alm_his[0].minute),                 \
+    L(T, "alm_his.second", alm_his[0].second), L(T, "alm_his.len_msg", alm_his[0].len_msg)
 struct layout { const char *type; const char *field; size_t offset; size_t size; };
 static const struct layout LAYOUTS[] = {
     L(ODBSYS, "addinfo", addinfo),
@@ -157,46 +164,19 @@ static const struct layout LAYOUTS[] = {
     L(ODBAHIS2, "s_no", s_no),
     L(ODBAHIS2, "e_no", e_no),
     L(ODBAHIS2, "alm_his", alm_his),
-    L(ODBAHIS2, "alm_his.alm_grp", alm_his[0].alm_grp),
-    L(ODBAHIS2, "alm_his.alm_no", alm_his[0].alm_no),
-    L(ODBAHIS2, "alm_his.axis_no", alm_his[0].axis_no),
-    L(ODBAHIS2, "alm_his.year", alm_his[0].year),
-    L(ODBAHIS2, "alm_his.month", alm_his[0].month),
-    L(ODBAHIS2, "alm_his.day", alm_his[0].day),
-    L(ODBAHIS2, "alm_his.hour", alm_his[0].hour),
-    L(ODBAHIS2, "alm_his.minute", alm_his[0].minute),
-    L(ODBAHIS2, "alm_his.second", alm_his[0].second),
-    L(ODBAHIS2, "alm_his.len_msg", alm_his[0].len_msg),
+    ALMHIS_HEAD(ODBAHIS2),
     L(ODBAHIS2, "alm_his.alm_msg", alm_his[0].alm_msg),
     L(ODBAHIS3, "s_no", s_no),
     L(ODBAHIS3, "e_no", e_no),
     L(ODBAHIS3, "alm_his", alm_his),
-    L(ODBAHIS3, "alm_his.alm_grp", alm_his[0].alm_grp),
-    L(ODBAHIS3, "alm_his.alm_no", alm_his[0].alm_no),
-    L(ODBAHIS3, "alm_his.axis_no", alm_his[0].axis_no),
-    L(ODBAHIS3, "alm_his.year", alm_his[0].year),
-    L(ODBAHIS3, "alm_his.month", alm_his[0].month),
-    L(ODBAHIS3, "alm_his.day", alm_his[0].day),
-    L(ODBAHIS3, "alm_his.hour", alm_his[0].hour),
-    L(ODBAHIS3, "alm_his.minute", alm_his[0].minute),
-    L(ODBAHIS3, "alm_his.second", alm_his[0].second),
-    L(ODBAHIS3, "alm_his.len_msg", alm_his[0].len_msg),
+    ALMHIS_HEAD(ODBAHIS3),
     L(ODBAHIS3, "alm_his.pth_no", alm_his[0].pth_no),
     L(ODBAHIS3, "alm_his.dummy", alm_his[0].dummy),
     L(ODBAHIS3, "alm_his.alm_msg", alm_his[0].alm_msg),
     L(ODBAHIS4, "s_no", s_no),
     L(ODBAHIS4, "e_no", e_no),
     L(ODBAHIS4, "alm_his", alm_his),
-    L(ODBAHIS4, "alm_his.alm_grp", alm_his[0].alm_grp),
-    L(ODBAHIS4, "alm_his.alm_no", alm_his[0].alm_no),
-    L(ODBAHIS4, "alm_his.axis_no", alm_his[0].axis_no),
-    L(ODBAHIS4, "alm_his.year", alm_his[0].year),
-    L(ODBAHIS4, "alm_his.month", alm_his[0].month),
-    L(ODBAHIS4, "alm_his.day", alm_his[0].day),
-    L(ODBAHIS4, "alm_his.hour", alm_his[0].hour),
-    L(ODBAHIS4, "alm_his.minute", alm_his[0].minute),
-    L(ODBAHIS4, "alm_his.second", alm_his[0].second),
-    L(ODBAHIS4, "alm_his.len_msg", alm_his[0].len_msg),
+    ALMHIS_HEAD(ODBAHIS4),
     L(ODBAHIS4, "alm_his.pth_no", alm_his[0].pth_no),
     L(ODBAHIS4, "alm_his.dummy", alm_his[0].dummy),
     L(ODBAHIS4, "alm_his.alm_msg", alm_his[0].alm_msg),
