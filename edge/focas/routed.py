@@ -39,6 +39,7 @@ class RoutedSession(CncSession):
         super().__init__(**timeouts)
         self.native = native
         self.library = library
+        self._library_connect: asyncio.Task[None] | None = None
 
     def describe(self) -> str:
         return f"{self.native.describe()} + {self.library.describe()}"
@@ -59,22 +60,35 @@ class RoutedSession(CncSession):
     # ---- lifecycle -------------------------------------------------------------------------------------
     async def _open(self) -> SysInfo:
         sysinfo = await self.native.connect()
-        await self._library_up()
+        self._library_up()
+        if self._library_connect is not None:  # give it part of the connect budget, so the first tick has it
+            await asyncio.wait({self._library_connect}, timeout=self.connect_timeout / 2)
         return sysinfo
 
-    async def _library_up(self) -> bool:
-        """Connect the library host if it is not; a failure is logged and reported per item, not raised."""
+    def _library_up(self) -> bool:
+        """Whether the library host is connected; if not, (re)connect it in the background.
+
+        Never waits: a library host that is down or slow to answer must not hold up the native batch (or
+        run it into the session timeout, which would reset the native connection too).
+        """
         if self.library.connected:
             return True
+        if self._library_connect is None or self._library_connect.done():
+            self._library_connect = asyncio.create_task(self._connect_library(), name="fwlib-host-connect")
+        return False
+
+    async def _connect_library(self) -> None:
         try:
             await self.library.connect()
         except FocasError as exc:
             log.warning("library host unavailable peer=%s error=%s (only the functions routed to it fail)",
                         self.library.describe(), exc)
-            return False
-        return True
 
     async def _close(self) -> None:
+        if self._library_connect is not None:
+            self._library_connect.cancel()
+            await asyncio.gather(self._library_connect, return_exceptions=True)
+            self._library_connect = None
         await asyncio.gather(self.native.close(), self.library.close(), return_exceptions=True)
 
     # ---- reads -----------------------------------------------------------------------------------------
@@ -82,7 +96,7 @@ class RoutedSession(CncSession):
         results: list[ItemResult] = [None] * len(items)
         native_at = [i for i, item in enumerate(items) if self.route(item.operation) != LIBRARY]
         library_at = [i for i, item in enumerate(items) if self.route(item.operation) == LIBRARY]
-        if library_at and await self._library_up():
+        if library_at and self._library_up():
             library_task = asyncio.ensure_future(self.library.batch([items[i] for i in library_at]))
         else:
             library_task = None
@@ -116,7 +130,7 @@ class RoutedSession(CncSession):
 
     async def _write_on(self, operation: str, call: Any) -> None:
         session = self._writer(operation)
-        if session is self.library and not await self._library_up():
+        if session is self.library and not self._library_up():
             call.close()
             raise CncError(EW_SOCKET, operation, message=f"{self.library.describe()}: library host not connected; "
                                                          f"nothing was written")

@@ -115,3 +115,37 @@ def test_probe_shows_which_transport_answers_each_function(capsys: pytest.Captur
     assert writes["write_macro"]["via"] == "native"
     history = [line for line in table.splitlines() if line.strip().startswith("ReadAlarmHistory")]
     assert history and "[fwlib-host]" in history[0]
+
+
+async def test_a_silent_library_host_never_holds_up_or_resets_the_native_polls(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    accepted: list[asyncio.StreamWriter] = []
+
+    async def silent(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        accepted.append(writer)  # accepts, reads nothing, answers nothing: a hung library host
+
+    silent_host = await asyncio.start_server(silent, "127.0.0.1", 0)
+    port = silent_host.sockets[0].getsockname()[1]
+    try:
+        async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+            machine = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, fwlib_host: 'tcp:127.0.0.1:{port}', "
+                       f"{TIMEOUTS}, poll: {{periods: {{status: 0.25}}}}}}\n")
+            daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA)))
+            task = asyncio.create_task(daemon.run())
+            try:
+                await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+                await async_wait_for(lambda: len(accepted) >= 2, timeout=15,
+                                     message="the library host retried in the background")
+                data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+                await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                                     timeout=15, message="native polls going on")
+            finally:
+                daemon.request_stop()
+                assert await asyncio.wait_for(task, 15) == 0
+    finally:
+        for writer in accepted:
+            writer.close()
+        silent_host.close()
+        await silent_host.wait_closed()
+    assert observer.on("spBv1.0/plant/DDEATH/gw/m1")[:-1] == []  # only the one at shutdown, if any
+    assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1
