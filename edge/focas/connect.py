@@ -15,6 +15,7 @@ from edge.focas.client import DEFAULT_PORT, FocasClient
 from edge.focas.session import CncSession
 
 TRANSPORTS = ("focas", "packed")
+LIBRARY_TIMEOUT_SHARE = 0.75  # of the machine's request timeout, for a library host beside a native session
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +71,10 @@ def open_session(transport: str, address: str, *, fwlib_host: str | None = None,
         from edge.focas.routed import RoutedSession
 
         common = {k: v for k, v in kw.items() if k != "max_subpackets"}  # timeouts and backoff
-        return RoutedSession(open_session("focas", address, **kw), open_session("packed", fwlib_host, **common),
+        # The library host's requests time out first, so its own session resets cleanly (its items fail)
+        # before the routed session's timeout could reset the native connection too.
+        library = {**common, "timeout": LIBRARY_TIMEOUT_SHARE * float(common.get("timeout", 5.0))}
+        return RoutedSession(open_session("focas", address, **kw), open_session("packed", fwlib_host, **library),
                              **common)
     if transport == "focas":
         parsed = parse_address(address)

@@ -65,7 +65,9 @@ class HostSettings(BaseModel):
 
     library: str = Field(min_length=1)
     log_file: str = Field(default="focas.log", description="cnc_startupprocess's log file (Linux)")
-    call_timeout_s: float = Field(default=10.0, gt=0)
+    # Below the daemon's view of this host (0.75 x its request_s, 5 s by default), so a hung call answers
+    # EW_SOCKET before the daemon gives up on the request.
+    call_timeout_s: float = Field(default=3.0, gt=0)
     connect_timeout_s: float = Field(default=10.0, gt=0)
     backoff_initial_s: float = Field(default=0.5, gt=0)
     backoff_max_s: float = Field(default=30.0, gt=0)

@@ -50,7 +50,7 @@ class CncTarget:
 
 @dataclass(frozen=True)
 class WorkerTimeouts:
-    call_s: float = 10.0
+    call_s: float = 3.0
     connect_s: float = 10.0
     backoff_initial_s: float = 0.5
     backoff_max_s: float = 30.0

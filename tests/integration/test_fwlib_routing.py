@@ -18,6 +18,8 @@ from edge.cli import EXIT_OK, main
 from edge.config import parse_config
 from edge.daemon import Daemon
 from edge.focas import packed as pk
+from edge.focas.model import SysInfo
+from edge.focas.packed_endpoint import start_packed_endpoint
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config
@@ -149,3 +151,37 @@ async def test_a_silent_library_host_never_holds_up_or_resets_the_native_polls(
         await silent_host.wait_closed()
     assert observer.on("spBv1.0/plant/DDEATH/gw/m1")[:-1] == []  # only the one at shutdown, if any
     assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1
+
+
+async def test_a_library_host_that_stops_answering_fails_its_items_not_the_native_session(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+
+    never = asyncio.Event()
+
+    async def answers_only_sysinfo(command: int, payload: bytes) -> bytes:
+        if command == pk.Command.SYSINFO:
+            return pk.read_response(pk.encode_sysinfo(SysInfo(0, 8, "31", " M", "G421", "0013", "03")))
+        await never.wait()  # a hung library host: connected, then silent
+        return b""
+
+    host = await start_packed_endpoint(answers_only_sysinfo)
+    try:
+        async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+            machine = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, fwlib_host: '{host.address}', "
+                       f"{TIMEOUTS}, poll: {{periods: {{status: 0.25}}}}}}\n")
+            daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA)))
+            task = asyncio.create_task(daemon.run())
+            try:
+                await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+                await async_wait_for(lambda: len(host.requests_for(pk.Command.RDALMHISTRY)) >= 2, timeout=15,
+                                     message="history requests timing out and retried")
+                data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+                await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                                     timeout=15, message="native polls going on")
+            finally:
+                daemon.request_stop()
+                assert await asyncio.wait_for(task, 15) == 0
+    finally:
+        never.set()
+        await host.close()
+    assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1  # the native session was never reset
