@@ -14,7 +14,7 @@
 #include <string.h>
 #include <time.h>
 
-#define MAX_AXIS 32
+#include "fwlib_structs.h"
 
 #define EW_HANDLE (-8)
 #define EW_SOCKET (-16)
@@ -26,168 +26,12 @@
 #define EW_DATA 5
 #define EW_PASSWD 17
 
-/* ---- the structs, as fwlib32.h declares them ------------------------------------------------------ */
-typedef struct odbsys {
-    short addinfo; short max_axis; char cnc_type[2]; char mt_type[2]; char series[4]; char version[4];
-    char axes[2];
-} ODBSYS;
-typedef struct odbst {
-    short hdck; short tmmode; short aut; short run; short motion; short mstb; short emergency; short alarm;
-    short edit;
-} ODBST;
-typedef struct realprm { long prm_val; long dec_val; } REALPRM;
-typedef struct iodbpsd {
-    short datano; short type;
-    union {
-        char cdata; short idata; long ldata; REALPRM rdata;
-        char cdatas[MAX_AXIS]; short idatas[MAX_AXIS]; long ldatas[MAX_AXIS]; REALPRM rdatas[MAX_AXIS];
-    } u;
-} IODBPSD;
-typedef struct odbm { short datano; short dummy; long mcr_val; short dec_val; } ODBM;
-typedef struct iodbpmc {
-    short type_a; short type_d; short datano_s; short datano_e;
-    union { char cdata[5]; short idata[5]; long ldata[5]; float fdata[5]; double dfdata[5]; } u;
-} IODBPMC;
-typedef struct odbalm { short dummy[2]; short data; } ODBALM;
-typedef struct odbalmmsg {
-    long alm_no; short type; short axis; short dummy; short msg_len; char alm_msg[32];
-} ODBALMMSG;
-typedef struct odbact { short dummy[2]; long data; } ODBACT;
-typedef struct iodbtimer {
-    short type; short dummy;
-    union {
-        struct { short year; short month; short date; } date;
-        struct { short hour; short minute; short second; } time;
-    } data;
-} IODBTIMER;
-typedef struct odbahis2 {
-    unsigned short s_no; unsigned short e_no;
-    struct {
-        short alm_grp; short alm_no; short axis_no; short year; short month; short day; short hour;
-        short minute; short second; short len_msg; char alm_msg[32];
-    } alm_his[10];
-} ODBAHIS2;
-typedef struct odbahis3 {
-    unsigned short s_no; unsigned short e_no;
-    struct {
-        short alm_grp; short alm_no; short axis_no; short year; short month; short day; short hour;
-        short minute; short second; short len_msg; short pth_no; short dummy; char alm_msg[32];
-    } alm_his[10];
-} ODBAHIS3;
-typedef struct odbahis4 {
-    unsigned short s_no; unsigned short e_no;
-    struct {
-        short alm_grp; short alm_no; short axis_no; short year; short month; short day; short hour;
-        short minute; short second; short len_msg; short pth_no; short dummy; char alm_msg[64];
-    } alm_his[10];
-} ODBAHIS4;
-
 /* ---- layouts as this compiler lays them out ------------------------------------------------------ */
-#define L(T, name, member) {#T, name, offsetof(T, member), sizeof(((T *)0)->member)}
-/* the ten fields every ODBAHISn entry starts with */
-#define ALMHIS_HEAD(T)                                                                                  \
-    L(T, "alm_his.alm_grp", alm_his[0].alm_grp), L(T, "alm_his.alm_no", alm_his[0].alm_no),           \
-    L(T, "alm_his.axis_no", alm_his[0].axis_no), L(T, "alm_his.year", alm_his[0].year),               \
-    L(T, "alm_his.month", alm_his[0].month), L(T, "alm_his.day", alm_his[0].day),                     \
-    L(T, "alm_his.hour", alm_his[0].hour), L(T, "alm_his.minute", alm_his[0].minute),                 \
-    L(T, "alm_his.second", alm_his[0].second), L(T, "alm_his.len_msg", alm_his[0].len_msg)
 struct layout { const char *type; const char *field; size_t offset; size_t size; };
-static const struct layout LAYOUTS[] = {
-    L(ODBSYS, "addinfo", addinfo),
-    L(ODBSYS, "max_axis", max_axis),
-    L(ODBSYS, "cnc_type", cnc_type),
-    L(ODBSYS, "mt_type", mt_type),
-    L(ODBSYS, "series", series),
-    L(ODBSYS, "version", version),
-    L(ODBSYS, "axes", axes),
-    L(ODBST, "hdck", hdck),
-    L(ODBST, "tmmode", tmmode),
-    L(ODBST, "aut", aut),
-    L(ODBST, "run", run),
-    L(ODBST, "motion", motion),
-    L(ODBST, "mstb", mstb),
-    L(ODBST, "emergency", emergency),
-    L(ODBST, "alarm", alarm),
-    L(ODBST, "edit", edit),
-    L(REALPRM, "prm_val", prm_val),
-    L(REALPRM, "dec_val", dec_val),
-    L(IODBPSD, "datano", datano),
-    L(IODBPSD, "type", type),
-    L(IODBPSD, "u", u),
-    L(IODBPSD, "u.cdata", u.cdata),
-    L(IODBPSD, "u.idata", u.idata),
-    L(IODBPSD, "u.ldata", u.ldata),
-    L(IODBPSD, "u.rdata", u.rdata),
-    L(IODBPSD, "u.rdata.prm_val", u.rdata.prm_val),
-    L(IODBPSD, "u.rdata.dec_val", u.rdata.dec_val),
-    L(IODBPSD, "u.cdatas", u.cdatas),
-    L(IODBPSD, "u.idatas", u.idatas),
-    L(IODBPSD, "u.ldatas", u.ldatas),
-    L(IODBPSD, "u.rdatas", u.rdatas),
-    L(IODBPSD, "u.rdatas.prm_val", u.rdatas[0].prm_val),
-    L(IODBPSD, "u.rdatas.dec_val", u.rdatas[0].dec_val),
-    L(ODBM, "datano", datano),
-    L(ODBM, "dummy", dummy),
-    L(ODBM, "mcr_val", mcr_val),
-    L(ODBM, "dec_val", dec_val),
-    L(IODBPMC, "type_a", type_a),
-    L(IODBPMC, "type_d", type_d),
-    L(IODBPMC, "datano_s", datano_s),
-    L(IODBPMC, "datano_e", datano_e),
-    L(IODBPMC, "u", u),
-    L(IODBPMC, "u.cdata", u.cdata),
-    L(IODBPMC, "u.idata", u.idata),
-    L(IODBPMC, "u.ldata", u.ldata),
-    L(IODBPMC, "u.fdata", u.fdata),
-    L(IODBPMC, "u.dfdata", u.dfdata),
-    L(ODBALM, "dummy", dummy),
-    L(ODBALM, "data", data),
-    L(ODBALMMSG, "alm_no", alm_no),
-    L(ODBALMMSG, "type", type),
-    L(ODBALMMSG, "axis", axis),
-    L(ODBALMMSG, "dummy", dummy),
-    L(ODBALMMSG, "msg_len", msg_len),
-    L(ODBALMMSG, "alm_msg", alm_msg),
-    L(ODBACT, "dummy", dummy),
-    L(ODBACT, "data", data),
-    L(IODBTIMER, "type", type),
-    L(IODBTIMER, "dummy", dummy),
-    L(IODBTIMER, "data", data),
-    L(IODBTIMER, "data.date", data.date),
-    L(IODBTIMER, "data.date.year", data.date.year),
-    L(IODBTIMER, "data.date.month", data.date.month),
-    L(IODBTIMER, "data.date.date", data.date.date),
-    L(IODBTIMER, "data.time", data.time),
-    L(IODBTIMER, "data.time.hour", data.time.hour),
-    L(IODBTIMER, "data.time.minute", data.time.minute),
-    L(IODBTIMER, "data.time.second", data.time.second),
-    L(ODBAHIS2, "s_no", s_no),
-    L(ODBAHIS2, "e_no", e_no),
-    L(ODBAHIS2, "alm_his", alm_his),
-    ALMHIS_HEAD(ODBAHIS2),
-    L(ODBAHIS2, "alm_his.alm_msg", alm_his[0].alm_msg),
-    L(ODBAHIS3, "s_no", s_no),
-    L(ODBAHIS3, "e_no", e_no),
-    L(ODBAHIS3, "alm_his", alm_his),
-    ALMHIS_HEAD(ODBAHIS3),
-    L(ODBAHIS3, "alm_his.pth_no", alm_his[0].pth_no),
-    L(ODBAHIS3, "alm_his.dummy", alm_his[0].dummy),
-    L(ODBAHIS3, "alm_his.alm_msg", alm_his[0].alm_msg),
-    L(ODBAHIS4, "s_no", s_no),
-    L(ODBAHIS4, "e_no", e_no),
-    L(ODBAHIS4, "alm_his", alm_his),
-    ALMHIS_HEAD(ODBAHIS4),
-    L(ODBAHIS4, "alm_his.pth_no", alm_his[0].pth_no),
-    L(ODBAHIS4, "alm_his.dummy", alm_his[0].dummy),
-    L(ODBAHIS4, "alm_his.alm_msg", alm_his[0].alm_msg),
-};
-static const struct { const char *type; size_t size; } SIZES[] = {
-    {"ODBSYS", sizeof(ODBSYS)}, {"ODBST", sizeof(ODBST)}, {"REALPRM", sizeof(REALPRM)},
-    {"IODBPSD", sizeof(IODBPSD)}, {"ODBM", sizeof(ODBM)}, {"IODBPMC", sizeof(IODBPMC)},
-    {"ODBALM", sizeof(ODBALM)}, {"ODBALMMSG", sizeof(ODBALMMSG)}, {"ODBACT", sizeof(ODBACT)},
-    {"IODBTIMER", sizeof(IODBTIMER)}, {"ODBAHIS2", sizeof(ODBAHIS2)}, {"ODBAHIS3", sizeof(ODBAHIS3)},
-    {"ODBAHIS4", sizeof(ODBAHIS4)},
-};
+#define L(T, name, member) {#T, name, offsetof(T, member), sizeof(((T *)0)->member)},
+static const struct layout LAYOUTS[] = { FWLIB_FIELDS(L) };
+#define SIZE_OF(T) {#T, sizeof(T)},
+static const struct { const char *type; size_t size; } SIZES[] = { FWLIB_STRUCTS(SIZE_OF) };
 static char layout_text[16384];
 
 /* "TYPE FIELD OFFSET SIZE" lines for every field, then "TYPE * 0 SIZEOF" per struct. */

@@ -17,6 +17,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "standin.c"
+LAYOUT_SOURCE = HERE / "layouts.c"
 ENSURE_GCC = HERE.parent.parent / "scripts" / "ensure-gcc.sh"
 
 
@@ -33,6 +34,32 @@ def _build() -> tuple[str | None, str]:
     if result.returncode != 0:
         return None, f"gcc could not build the stand-in library: {result.stderr.strip()}"
     return str(out), ""
+
+
+def cross_layouts(flags: list[str], order: list[tuple[str, str]]) -> dict[str, dict[str, tuple[int, int]]]:
+    """The layouts gcc chooses with `flags` (e.g. -m32), read from its assembly of layouts.c.
+
+    `order` is the (struct, field) sequence of the table (the native stand-in's, same X-macro); the test
+    skips when gcc cannot compile for that ABI.
+    """
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        pytest.skip("gcc is not installed")
+    result = subprocess.run([gcc, *flags, "-S", "-o", "-", str(LAYOUT_SOURCE)], capture_output=True, text=True,
+                            timeout=120)
+    if result.returncode != 0:
+        pytest.skip(f"gcc {' '.join(flags)} cannot compile here: {result.stderr.strip()[:200]}")
+    numbers = [int(line.split()[1]) - 1 for line in result.stdout.splitlines()
+               if line.strip().startswith(".long")]
+    structs = sorted({struct for struct, _ in order}, key=[s for s, _ in order].index)
+    fields = [(struct, field) for struct, field in order if field != "*"]
+    assert len(numbers) == 2 * len(fields) + len(structs), "layouts.c and the stand-in's table disagree"
+    table: dict[str, dict[str, tuple[int, int]]] = {}
+    for index, (struct, field) in enumerate(fields):
+        table.setdefault(struct, {})[field] = (numbers[2 * index], numbers[2 * index + 1])
+    for index, struct in enumerate(structs):
+        table[struct]["*"] = (0, numbers[2 * len(fields) + index])
+    return table
 
 
 def standin_library() -> str:
@@ -58,12 +85,19 @@ class Standin:
         self.lib.standin_calls.argtypes = [ctypes.c_char_p]
         self.lib.standin_reset()
 
-    def layouts(self) -> dict[str, dict[str, tuple[int, int]]]:
-        """{struct: {field path or '*': (offset, size)}} as the C compiler laid them out."""
-        table: dict[str, dict[str, tuple[int, int]]] = {}
+    def layout_rows(self) -> list[tuple[str, str, int, int]]:
+        """(struct, field path or '*', offset, size) in the table's order, as the C compiler laid them out."""
+        rows = []
         for line in self.lib.standin_layouts().decode().splitlines():
             struct, field, offset, size = line.split()
-            table.setdefault(struct, {})[field] = (int(offset), int(size))
+            rows.append((struct, field, int(offset), int(size)))
+        return rows
+
+    def layouts(self) -> dict[str, dict[str, tuple[int, int]]]:
+        """{struct: {field path or '*': (offset, size)}}."""
+        table: dict[str, dict[str, tuple[int, int]]] = {}
+        for struct, field, offset, size in self.layout_rows():
+            table.setdefault(struct, {})[field] = (offset, size)
         return table
 
     def set_param(self, number: int, ptype: int, value: int, dec: int = 0) -> None:

@@ -13,7 +13,7 @@ import sys
 import pytest
 
 from edge.fwlib import structs as st
-from tests.fwlib.standin import Standin, standin_library
+from tests.fwlib.standin import Standin, cross_layouts, standin_library
 
 
 @pytest.fixture(scope="module")
@@ -41,3 +41,15 @@ def test_every_c_struct_is_checked(c_layouts: dict[str, dict[str, tuple[int, int
 def test_lp64_long_puts_the_iodbpsd_union_at_8() -> None:
     assert st.IODBPSD.u.offset == 8
     assert ctypes.sizeof(st.ODBM) == 24  # long mcr_val at 8, short dec_val at 16, padded to 8
+
+
+def test_32_bit_x86_linux_layout_matches_ctypes_with_a_4_byte_long() -> None:
+    """FANUC's x86 Linux build: gcc -m32 lays the same declarations out; ctypes built with a 4-byte long and
+    natural alignment must agree (IODBPSD's union at 4, ODBM 12 bytes)."""
+    order = [(struct, field) for struct, field, _, _ in Standin(standin_library()).layout_rows()]
+    theirs = cross_layouts(["-m32"], order)
+    ours = st.build(ctypes.c_int32, None)
+    for name in st.TOP_LEVEL:
+        assert ctypes.sizeof(ours[name]) == theirs[name]["*"][1], name
+        assert st.field_layout(ours[name]) == {f: at for f, at in theirs[name].items() if f != "*"}, name
+    assert theirs["IODBPSD"]["u"][0] == 4 and theirs["ODBM"]["*"][1] == 12
