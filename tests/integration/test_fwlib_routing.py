@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import pytest
@@ -119,6 +119,28 @@ def test_probe_shows_which_transport_answers_each_function(capsys: pytest.Captur
     assert history and "[fwlib-host]" in history[0]
 
 
+async def native_polls_go_on(mosquitto: Mosquitto, observer: Observer, tmp_path: Path, fwlib_host: str,
+                             library_tried: Callable[[], bool]) -> None:
+    """Run the daemon on a native machine with this library host until the host was tried and the native
+    polls went on; then the machine was born once and never reset (no DDEATH before shutdown)."""
+    async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+        machine = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, fwlib_host: '{fwlib_host}', "
+                   f"{TIMEOUTS}, poll: {{periods: {{status: 0.25}}}}}}\n")
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA)))
+        task = asyncio.create_task(daemon.run())
+        try:
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+            await async_wait_for(library_tried, timeout=15, message="the library host tried (again)")
+            data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+            await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                                 timeout=15, message="native polls going on")
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 15) == 0
+    assert observer.on("spBv1.0/plant/DDEATH/gw/m1")[:-1] == []  # only the one at shutdown, if any
+    assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1
+
+
 async def test_a_silent_library_host_never_holds_up_or_resets_the_native_polls(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
     accepted: list[asyncio.StreamWriter] = []
@@ -129,33 +151,17 @@ async def test_a_silent_library_host_never_holds_up_or_resets_the_native_polls(
     silent_host = await asyncio.start_server(silent, "127.0.0.1", 0)
     port = silent_host.sockets[0].getsockname()[1]
     try:
-        async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
-            machine = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, fwlib_host: 'tcp:127.0.0.1:{port}', "
-                       f"{TIMEOUTS}, poll: {{periods: {{status: 0.25}}}}}}\n")
-            daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA)))
-            task = asyncio.create_task(daemon.run())
-            try:
-                await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
-                await async_wait_for(lambda: len(accepted) >= 2, timeout=15,
-                                     message="the library host retried in the background")
-                data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
-                await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
-                                     timeout=15, message="native polls going on")
-            finally:
-                daemon.request_stop()
-                assert await asyncio.wait_for(task, 15) == 0
+        await native_polls_go_on(mosquitto, observer, tmp_path, f"tcp:127.0.0.1:{port}",
+                                 lambda: len(accepted) >= 2)  # connect retried in the background
     finally:
         for writer in accepted:
             writer.close()
         silent_host.close()
         await silent_host.wait_closed()
-    assert observer.on("spBv1.0/plant/DDEATH/gw/m1")[:-1] == []  # only the one at shutdown, if any
-    assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1
 
 
 async def test_a_library_host_that_stops_answering_fails_its_items_not_the_native_session(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
-
     never = asyncio.Event()
 
     async def answers_only_sysinfo(command: int, payload: bytes) -> bytes:
@@ -166,22 +172,8 @@ async def test_a_library_host_that_stops_answering_fails_its_items_not_the_nativ
 
     host = await start_packed_endpoint(answers_only_sysinfo)
     try:
-        async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
-            machine = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, fwlib_host: '{host.address}', "
-                       f"{TIMEOUTS}, poll: {{periods: {{status: 0.25}}}}}}\n")
-            daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine, EXTRA)))
-            task = asyncio.create_task(daemon.run())
-            try:
-                await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
-                await async_wait_for(lambda: len(host.requests_for(pk.Command.RDALMHISTRY)) >= 2, timeout=15,
-                                     message="history requests timing out and retried")
-                data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
-                await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
-                                     timeout=15, message="native polls going on")
-            finally:
-                daemon.request_stop()
-                assert await asyncio.wait_for(task, 15) == 0
+        await native_polls_go_on(mosquitto, observer, tmp_path, host.address,
+                                 lambda: len(host.requests_for(pk.Command.RDALMHISTRY)) >= 2)
     finally:
         never.set()
         await host.close()
-    assert len(observer.on("spBv1.0/plant/DBIRTH/gw/m1")) == 1  # the native session was never reset
