@@ -640,6 +640,9 @@ class MachineConfig(_Model):
     port: int = Field(default=NATIVE_PORT, ge=1, le=65535)
     transport: Literal["focas", "packed"] = "focas"
     address: str | None = None
+    # A FOCAS library host (focas-edge fwlib-host) beside the native connection: alarm history and parameter
+    # writes go there, every other function stays native (edge.focas.routed).
+    fwlib_host: str | None = None
     series: str | None = None
     timezone: str = "UTC"
     timeouts: Timeouts = Field(default_factory=Timeouts)
@@ -660,7 +663,7 @@ class MachineConfig(_Model):
                 from None
         return value
 
-    @field_validator("address")
+    @field_validator("address", "fwlib_host")
     @classmethod
     def _address(cls, value: str | None) -> str | None:
         if value is not None and not _PACKED_ADDRESS_RE.fullmatch(value):
@@ -669,7 +672,8 @@ class MachineConfig(_Model):
 
     @model_validator(mode="after")
     def _endpoint(self) -> MachineConfig:
-        for key, message in _endpoint_rules(self.transport, self.host, self.address, self.max_subpackets):
+        for key, message in _endpoint_rules(self.transport, self.host, self.address, self.max_subpackets,
+                                            self.fwlib_host):
             raise _at(key, message)
         return self
 
@@ -807,6 +811,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     if problems:
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
+    config._warnings.extend(_history_route_warnings(config))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
@@ -923,6 +928,22 @@ def _clamp_warnings(data: dict[str, Any]) -> list[str]:
     return warnings
 
 
+def _history_route_warnings(config: Config) -> list[str]:
+    """ActivePlusHistory on a native-only machine: the wire has no public alarm-history code (docs/protocol.md)."""
+    warnings = []
+    for index, machine in enumerate(config.machines):
+        if config.alarms_for(machine).mode != "ActivePlusHistory":
+            continue
+        if machine.transport == "focas" and machine.fwlib_host is None:
+            warnings.append(
+                f"machines[{index}] ({machine.id}): alarms mode ActivePlusHistory on the native transport alone: "
+                f"the CNC's alarm history will NOT be published (no public wire code for cnc_rdalmhistry; "
+                f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
+                f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
+                f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
+    return warnings
+
+
 def _duplicate_ids(data: dict[str, Any]) -> Iterator[str]:
     """Machine ids used twice (ignoring case), read from the raw data so they show beside other errors."""
     machines = data.get("machines")
@@ -965,7 +986,7 @@ def _mqtt_cross_checks(data: dict[str, Any]) -> Iterator[str]:
 
 
 def _endpoint_rules(transport: object, host: object, address: object,
-                    max_subpackets: object) -> list[tuple[str, str]]:
+                    max_subpackets: object, fwlib_host: object) -> list[tuple[str, str]]:
     """Rules between a machine's endpoint keys as (key, message), for the model and the raw re-check."""
     rules = []
     if transport == "focas" and address is not None:
@@ -974,6 +995,9 @@ def _endpoint_rules(transport: object, host: object, address: object,
         rules.append(("host", "required" + (" (or address)" if transport == "packed" else "")))
     if host is not None and address is not None:
         rules.append(("address", "give host/port or address, not both"))
+    if transport != "focas" and fwlib_host is not None:
+        rules.append(("fwlib_host", "only beside the native transport (focas); with transport packed, address "
+                                    "already names the library host"))
     if transport != "focas" and max_subpackets is not None:
         rules.append(("max_subpackets", "only for transport focas (the packed surface has no subpackets)"))
     return rules
@@ -985,7 +1009,8 @@ def _machine_cross_checks(data: dict[str, Any]) -> Iterator[str]:
     for index, machine in enumerate(machines if isinstance(machines, list) else []):
         if isinstance(machine, dict):
             for key, message in _endpoint_rules(machine.get("transport", "focas"), machine.get("host"),
-                                                machine.get("address"), machine.get("max_subpackets")):
+                                                machine.get("address"), machine.get("max_subpackets"),
+                                                machine.get("fwlib_host")):
                 yield f"machines[{index}].{key}: {message}"
 
 

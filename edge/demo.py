@@ -75,7 +75,10 @@ async def start_fleet(config: Config) -> tuple[Fleet, Config]:
             machines.append(machine.model_copy(update={"host": None,
                                                        "address": f"tcp:127.0.0.1:{sim.packed_port}"}))
         else:
-            machines.append(machine.model_copy(update={"host": "127.0.0.1", "port": sim.port}))
+            update: dict[str, object] = {"host": "127.0.0.1", "port": sim.port}
+            if machine.fwlib_host is not None:  # the simulator's packed surface stands in for fwlib-host
+                update["fwlib_host"] = f"tcp:127.0.0.1:{sim.packed_port}"
+            machines.append(machine.model_copy(update=update))
     return fleet, config.model_copy(update={"machines": machines})
 
 
@@ -96,7 +99,7 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
             mqtt = mqtt.model_copy(update={"protocol": "3.1.1"})
             config = config.model_copy(update={"mqtt": mqtt})
     for machine, sim in zip(config.machines, fleet, strict=True):
-        where = machine.endpoint
+        where = machine.endpoint + (f" + library host {machine.fwlib_host}" if machine.fwlib_host else "")
         print(f"== simulated CNC {machine.id:<10} profile {sim.state.profile.name:<5} at {where}", flush=True)
     prefix = mqtt.json_topics.prefix
     group = mqtt.sparkplug.group_id if mqtt.sparkplug else "+"

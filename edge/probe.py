@@ -21,7 +21,10 @@ from typing import Any
 from edge.focas import items as it
 from edge.focas.errors import EW_FUNC, EW_NOOPT, CncError, FocasError, NotSupported
 from edge.focas.model import ParamRecord, PmcType, SysInfo
+from edge.focas.routed import LIBRARY, NATIVE
 from edge.focas.session import CncSession
+
+ROUTES = (NATIVE, LIBRARY, "-")  # the per-function transports a routed machine reports
 
 
 class Outcome:
@@ -46,6 +49,7 @@ class ProbeStep:
     ew_code: int | None = None
     ew_name: str = ""
     detail: str = ""  # a short value summary, or the error message
+    via: str = ""  # which transport answered: the session's, or native / fwlib-host on a routed machine
 
     @property
     def works(self) -> bool:
@@ -61,6 +65,7 @@ class WriteCheck:
     paired_read: str  # the read the operation relies on (read-back, type lookup, read-modify-write)
     paired_read_works: bool
     note: str = ""
+    via: str = ""  # the transport that would carry it (see ProbeStep.via)
 
     @property
     def available(self) -> bool:
@@ -188,12 +193,21 @@ def _step(item: it.ReadItem, result: Any, rtt_ms: float | None, command: str) ->
     return replace(step, detail=summarize(result))
 
 
+def answered_by(cnc: CncSession, operation: str) -> str:
+    """The transport an operation goes to: per function on a routed machine (fwlib_host), else the one."""
+    route = getattr(cnc, "route", None)
+    if route is None:
+        return cnc.transport
+    return str(route(operation) or "-")
+
+
 async def _try(cnc: CncSession, item: it.ReadItem) -> ProbeStep:
     command = _native_commands(cnc, item)
     started = time.perf_counter()
     (result,) = await cnc.batch([item])
     rtt_ms = round((time.perf_counter() - started) * 1000, 2)
-    return _step(item, result, rtt_ms, command)  # NotSupported answers locally: its rtt is None
+    step = _step(item, result, rtt_ms, command)  # NotSupported answers locally: its rtt is None
+    return replace(step, via=answered_by(cnc, item.operation))
 
 
 async def _try_other_record_form(cnc: CncSession, items: Sequence[it.ReadItem]) -> list[ProbeStep]:
@@ -227,7 +241,7 @@ def check_writes(cnc: CncSession, steps: Sequence[ProbeStep]) -> list[WriteCheck
         WriteCheck("set_clock", can("set_clock"), "ReadClock", "ReadClock" in works,
                    "time of day only on the native transport"),
     ]
-    return checks
+    return [replace(check, via=answered_by(cnc, check.operation)) for check in checks]
 
 
 async def probe(cnc: CncSession, address: str) -> ProbeReport:
@@ -273,13 +287,13 @@ def report_json(report: ProbeReport) -> dict[str, Any]:
         "functions": [
             {"function": s.function, "arguments": s.arguments, "command": s.command or None,
              "outcome": s.outcome, "rtt_ms": s.rtt_ms, "ew_code": s.ew_code, "ew_name": s.ew_name or None,
-             "detail": s.detail}
+             "detail": s.detail, "via": s.via}
             for s in report.steps
         ],
         "writes": [
             {"operation": w.operation, "available": w.available, "transport_has_it": w.transport_has_it,
              "paired_read": w.paired_read, "paired_read_works": w.paired_read_works, "note": w.note,
-             "tried": False}
+             "tried": False, "via": w.via}
             for w in report.writes
         ],
     }
@@ -310,7 +324,8 @@ def report_lines(report: ProbeReport) -> list[str]:
             if not w.paired_read_works:
                 why.append(f"{w.paired_read} does not work here")
             note = "; ".join(why) or w.note
-            lines.append(f"    {w.operation:<12} {verdict:<14} {note}".rstrip())
+            via = f"[{w.via}] " if w.via in ROUTES else ""
+            lines.append(f"    {w.operation:<12} {verdict:<14} {via}{note}".rstrip())
     if report.steps:
         ok = sum(1 for s in report.steps if s.works)
         lines.append("")
@@ -325,6 +340,5 @@ def _rtt(rtt_ms: float | None) -> str:
 
 
 def _answer(step: ProbeStep) -> str:
-    if step.ew_name:
-        return f"{step.ew_name} ({step.ew_code})"
-    return step.detail
+    answer = f"{step.ew_name} ({step.ew_code})" if step.ew_name else step.detail
+    return f"[{step.via}] {answer}" if step.via in ROUTES else answer

@@ -15,7 +15,7 @@ from edge.logformat import LOG_FORMATS, configure_logging
 # Subcommand modules in the order `--help` lists them. Each defines
 #   register(subparsers) -> None   adding its parser with set_defaults(func=handler)
 # where handler(args) -> int returns the exit code.
-SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config"]
+SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config", "fwlib_host"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1

@@ -62,6 +62,7 @@ def summary(config: Config, source: str) -> str:
         counts = (f"{sum(len(m.numbers) for m in poll.macros)} macros, "
                   f"{sum(len(p.addresses()) for p in poll.pmc)} PMC values, {len(poll.params)} params, "
                   f"{len(poll.diags)} diags")
-        lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}  tz {machine.timezone}  "
+        routed = f" + fwlib_host {machine.fwlib_host}" if machine.fwlib_host else ""
+        lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}{routed}  tz {machine.timezone}  "
                      f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}")
     return "\n".join(lines)

@@ -35,6 +35,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              "or unix:/path (packed transport only)")
     parser.add_argument("--transport", choices=("focas", "packed"), default="focas",
                         help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
+    parser.add_argument("--fwlib-host", default=None, metavar="ADDRESS",
+                        help="also a FOCAS library host (focas-edge fwlib-host: unix:/path or tcp:host:port) for "
+                             "what the native transport lacks; each function then shows [native] or [fwlib-host]")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
                         help=f"connect and per-request timeout (default {DEFAULT_TIMEOUT:g})")
     parser.add_argument("--json", action="store_true",
@@ -50,8 +53,8 @@ def handle(args: argparse.Namespace) -> int:
         print(f"focas-edge probe: --timeout must be positive, got {args.timeout:g}", file=sys.stderr)
         return EXIT_USAGE
     try:
-        session: Any = open_session(args.transport, args.address, timeout=args.timeout,
-                                    connect_timeout=args.timeout)
+        session: Any = open_session(args.transport, args.address, fwlib_host=args.fwlib_host,
+                                    timeout=args.timeout, connect_timeout=args.timeout)
     except ConfigError as exc:
         print(f"focas-edge probe: {'; '.join(exc.problems)}", file=sys.stderr)
         return EXIT_USAGE

@@ -26,7 +26,7 @@ from datetime import datetime
 from itertools import compress
 from operator import is_not
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
@@ -154,10 +154,10 @@ SessionFactory = Callable[[MachineConfig], CncSession]
 
 def default_session(machine: MachineConfig) -> CncSession:
     timeouts = machine.timeouts
-    extra = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
-    return open_session(machine.transport, machine.endpoint, timeout=timeouts.request_s,
-                        connect_timeout=timeouts.connect_s, backoff_initial=timeouts.backoff_initial_s,
-                        backoff_max=timeouts.backoff_max_s, **extra)
+    extra: dict[str, Any] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
+    return open_session(machine.transport, machine.endpoint, fwlib_host=machine.fwlib_host,
+                        timeout=timeouts.request_s, connect_timeout=timeouts.connect_s,
+                        backoff_initial=timeouts.backoff_initial_s, backoff_max=timeouts.backoff_max_s, **extra)
 
 
 class MachinePoller:
@@ -183,6 +183,7 @@ class MachinePoller:
         self._history = AlarmHistoryDedup(history_store)
         self._dropped: dict[str, float] = {}  # operation -> monotonic time it was dropped (this session)
         self._retrying: set[str] = set()  # put back in the plan, not answered yet (still listed as dropped)
+        self._unsupported_ops: set[str] = set()  # planned, but the transport has no form for them (never retried)
         self._warned_dropped: set[str] = set()  # drops already logged at WARNING (once per daemon run)
         self._full_plan: pl.MachinePlan | None = None  # this session's plan before any drop
         self._plan: pl.MachinePlan | None = None
@@ -211,7 +212,7 @@ class MachinePoller:
     @property
     def dropped(self) -> list[str]:
         """Operations this control refused (EW_FUNC/EW_NOOPT/not supported), no longer polled."""
-        return sorted(self._dropped)
+        return sorted(self._dropped.keys() | self._retrying | self._unsupported_ops)
 
     @property
     def active_alarms(self) -> list[ActiveAlarm]:
@@ -353,11 +354,14 @@ class MachinePoller:
         return out
 
     def _unsupported(self, plan: pl.MachinePlan) -> list[str]:
+        """Planned reads this machine's transport cannot do: warned once, and listed in Plan/DroppedFunctions."""
         capabilities = self.session.capabilities
         missing = sorted({r.item.operation for r in plan.reads if not capabilities.can(r.item.operation)})
         for operation in missing:
-            log.info("not polled machine=%s operation=%s reason=not supported by the %s transport",
-                     self.machine_id, operation, capabilities.transport)
+            if operation not in self._unsupported_ops:
+                log.warning("not polled machine=%s operation=%s reason=not supported by the %s transport",
+                            self.machine_id, operation, capabilities.transport)
+        self._unsupported_ops = set(missing)
         return missing
 
     def _batch_for(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickBatch:
@@ -541,7 +545,7 @@ class MachinePoller:
     def _dropped_sample(self, samples: Sequence[Sample], timestamp: int | None = None) -> Sample:
         when = timestamp if timestamp is not None else (samples[0].timestamp_ms if samples else
                                                         int(time.time() * 1000))
-        listed = ",".join(sorted(self._dropped.keys() | self._retrying))
+        listed = ",".join(self.dropped)
         return Sample(DROPPED_FUNCTIONS.name, listed, DROPPED_FUNCTIONS.type, when)
 
     async def _read_active_alarms(self, plan: pl.MachinePlan, timestamp: int,

@@ -15,6 +15,7 @@ from edge.focas.client import DEFAULT_PORT, FocasClient
 from edge.focas.session import CncSession
 
 TRANSPORTS = ("focas", "packed")
+LIBRARY_TIMEOUT_SHARE = 0.75  # of the machine's request timeout, for a library host beside a native session
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,8 +59,23 @@ def parse_address(address: str, default_port: int = DEFAULT_PORT) -> Address:
     return Address(host=host, port=port)
 
 
-def open_session(transport: str, address: str, **kw: Any) -> CncSession:
-    """An unconnected session; use it as `async with open_session("focas", "10.0.0.5:8193") as cnc:`."""
+def open_session(transport: str, address: str, *, fwlib_host: str | None = None, **kw: Any) -> CncSession:
+    """An unconnected session; use it as `async with open_session("focas", "10.0.0.5:8193") as cnc:`.
+
+    With fwlib_host (a native machine that also has a FOCAS library host), a RoutedSession: each function
+    goes to the transport that has it, native first.
+    """
+    if fwlib_host is not None:
+        if transport != "focas":
+            raise ConfigError([f"fwlib_host {fwlib_host!r}: only beside transport focas (native)"])
+        from edge.focas.routed import RoutedSession
+
+        common = {k: v for k, v in kw.items() if k != "max_subpackets"}  # timeouts and backoff
+        # The library host's requests time out first, so its own session resets cleanly (its items fail)
+        # before the routed session's timeout could reset the native connection too.
+        library = {**common, "timeout": LIBRARY_TIMEOUT_SHARE * float(common.get("timeout", 5.0))}
+        return RoutedSession(open_session("focas", address, **kw), open_session("packed", fwlib_host, **library),
+                             **common)
     if transport == "focas":
         parsed = parse_address(address)
         if parsed.is_unix:

@@ -526,16 +526,41 @@ def almhis_padding(msg_len: int) -> int:
     return -msg_len % 4
 
 
+@dataclass(frozen=True, slots=True)
+class AlarmHistoryRow:
+    """One ODBALMHIS entry as raw fields: a bridge passes the CNC's date fields through unchecked (the
+    decoder skips an impossible date), which a datetime could not carry."""
+
+    year: int
+    month: int
+    day: int
+    hour: int
+    minute: int
+    second: int
+    axis_no: int
+    alm_type: int
+    alm_no: int
+    message: bytes
+
+
 def encode_alarm_history(entries: Sequence[AlarmHistoryEntry]) -> bytes:
     """ODBALMHIS for `entries` (newest first). Times are converted to UTC; sub-second parts are dropped."""
-    blocks = [_I16.pack(len(entries))]
+    rows = []
     for entry in entries:
         when = entry.occurred.astimezone(UTC) if entry.occurred.tzinfo else entry.occurred
-        message = entry.message.encode("ascii", errors="replace")
-        blocks.append(_ALMHIS_ENTRY.pack(when.year, when.month, when.day, when.hour, when.minute,
-                                         when.second, entry.axis_no, entry.alm_type, entry.alm_no,
-                                         len(message)))
-        blocks.append(message + b"\x00" * almhis_padding(len(message)))
+        rows.append(AlarmHistoryRow(when.year, when.month, when.day, when.hour, when.minute, when.second,
+                                    entry.axis_no, entry.alm_type, entry.alm_no,
+                                    entry.message.encode("ascii", errors="replace")))
+    return encode_alarm_history_rows(rows)
+
+
+def encode_alarm_history_rows(rows: Sequence[AlarmHistoryRow]) -> bytes:
+    """ODBALMHIS from raw rows (newest first), each block padded to a multiple of 4 from its start."""
+    blocks = [_I16.pack(len(rows))]
+    for row in rows:
+        blocks.append(_ALMHIS_ENTRY.pack(row.year, row.month, row.day, row.hour, row.minute, row.second,
+                                         row.axis_no, row.alm_type, row.alm_no, len(row.message)))
+        blocks.append(row.message + b"\x00" * almhis_padding(len(row.message)))
     return b"".join(blocks)
 
 

@@ -11,24 +11,19 @@ lone i16 EW_FUNC; a payload that does not parse answers EW_LENGTH (EW_ATTRIB for
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import logging
-import os
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from edge.focas import packed as pk
 from edge.focas.errors import EW_ATTRIB, EW_FUNC, EW_LENGTH, EW_PASSWD, CncError, ProtocolError
 from edge.focas.model import ParamRecord, PmcType
-from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.focas.packed_endpoint import PackedEndpoint, PackedRequest, start_packed_endpoint
 from edge.sim.state import MachineState
 
 log = logging.getLogger(__name__)
 
 PROTOCOL = "packed"  # the name writes carry in the machine's write log
-_READ_CHUNK = 65536
 
 
 def surface_status(error: CncError) -> int:
@@ -177,87 +172,50 @@ def answer(state: MachineState, command: int, payload: bytes) -> bytes:
     return pk.encode_status(status)
 
 
-# ---- the server ---------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class PackedRequest:
-    """One request as the server saw it (tests observe chunking and counts here)."""
-
-    command: int
-    payload: bytes
-
-
-@dataclass(eq=False)
+# ---- the server: the shared packed endpoint with this state behind it ---------------------------------
 class PackedServer:
-    """A running packed-surface server; `address` is what PackedClient takes."""
+    """A running packed-surface server for one MachineState; `address` is what PackedClient takes."""
 
-    state: MachineState
-    server: asyncio.Server
-    host: str = ""
-    port: int = 0
-    unix_path: str = ""
-    requests: list[PackedRequest] = field(default_factory=list)
-    _sessions: dict[asyncio.Task[None], asyncio.StreamWriter] = field(default_factory=dict)
+    def __init__(self, state: MachineState, endpoint: PackedEndpoint) -> None:
+        self.state = state
+        self.endpoint = endpoint
 
     @property
     def address(self) -> str:
-        if self.unix_path:
-            return f"unix:{self.unix_path}"
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"tcp:{host}:{self.port}"
+        return self.endpoint.address
+
+    @property
+    def host(self) -> str:
+        return self.endpoint.host
+
+    @property
+    def port(self) -> int:
+        return self.endpoint.port
+
+    @property
+    def unix_path(self) -> str:
+        return self.endpoint.unix_path
+
+    @property
+    def requests(self) -> list[PackedRequest]:
+        """Every request in arrival order (tests observe chunking and counts here)."""
+        return self.endpoint.requests
 
     @property
     def connections(self) -> int:
-        """Client connections now open."""
-        return len(self._sessions)
+        return self.endpoint.connections
 
     def requests_for(self, command: int) -> list[PackedRequest]:
-        return [r for r in self.requests if r.command == command]
+        return self.endpoint.requests_for(command)
 
     async def close(self) -> None:
-        """Stop listening and end every open session (the server does not wait for clients to hang up)."""
-        self.server.close()
-        for writer in self._sessions.values():
-            writer.close()  # the session's read then ends and its task returns
-        await asyncio.gather(*self._sessions, return_exceptions=True)
-        await self.server.wait_closed()
-        if self.unix_path:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.unix_path)
+        await self.endpoint.close()
 
     async def __aenter__(self) -> PackedServer:
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self.close()
-
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._sessions[task] = writer
-        try:
-            await self._session(reader, writer)
-        finally:
-            self._sessions.pop(task, None)
-
-    async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        peer = writer.get_extra_info("peername") or self.address
-        decoder = FrameDecoder()
-        try:
-            while data := await reader.read(_READ_CHUNK):
-                for frame in decoder.feed(data):
-                    self.requests.append(PackedRequest(frame.command, frame.payload))
-                    reply = answer(self.state, frame.command, frame.payload)
-                    writer.write(PackedFrame(frame.command, frame.seq, reply).encode())
-                await writer.drain()
-        except ProtocolError as exc:
-            log.warning("packed client sent a malformed frame peer=%s machine=%s error=%s",
-                        peer, self.state.name, exc)
-        except (ConnectionError, asyncio.IncompleteReadError):
-            pass
-        finally:
-            writer.close()
-            with contextlib.suppress(Exception):
-                await writer.wait_closed()
 
 
 async def start_packed_server(
@@ -271,15 +229,9 @@ async def start_packed_server(
 
     Call from the event loop that should run it; `await handle.close()` stops it.
     """
-    handle: PackedServer
-    if unix_path:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(unix_path)
-        server = await asyncio.start_unix_server(lambda r, w: handle._serve(r, w), path=unix_path)
-        handle = PackedServer(state, server, unix_path=unix_path)
-    else:
-        server = await asyncio.start_server(lambda r, w: handle._serve(r, w), host, port)
-        bound = server.sockets[0].getsockname()
-        handle = PackedServer(state, server, host=host, port=int(bound[1]))
-    log.info("packed surface serving machine=%s address=%s", state.name, handle.address)
-    return handle
+
+    async def respond(command: int, payload: bytes) -> bytes:
+        return answer(state, command, payload)
+
+    endpoint = await start_packed_endpoint(respond, host, port, unix_path=unix_path, name=state.name)
+    return PackedServer(state, endpoint)
