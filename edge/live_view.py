@@ -27,6 +27,11 @@ def is_event(line: str) -> bool:
     return line.startswith(EVENT_KINDS) or "/events/" in line
 
 
+def event_topic(line: str) -> str:
+    """The kind and topic of a decoded event line (`JSON   focas/m1/events/alarm = ...` -> `JSON focas/...`)."""
+    return " ".join(line.split()[:2])
+
+
 def machine_line(machine: dict[str, Any], width: int) -> str:
     values = {v["name"]: v["value"] for v in machine["values"]}
     state = "connected" if machine["connected"] else "OFFLINE  "
@@ -53,12 +58,26 @@ class LiveView:
         self._clock = clock
         self._drawn_lines = 0
         self._last_block: list[str] = []
+        self._last_topic = ""  # the topic of the tail's last event, and how many in a row it stands for
+        self._repeats = 0
 
     def on_line(self, line: str) -> None:
-        """A decoded line from the watcher (its MQTT thread): counted, and kept if it is an event."""
+        """A decoded line from the watcher (its MQTT thread): counted, and kept if it is an event.
+
+        A run of events on one topic (an alarm-history backlog, say) takes one line with a count, so a
+        burst never pushes the births out of the tail.
+        """
         self.messages += 1
-        if is_event(line):
-            self.events.append(time.strftime("%H:%M:%S ", time.localtime(self._clock())) + line)
+        if not is_event(line):
+            return
+        stamp = time.strftime("%H:%M:%S ", time.localtime(self._clock()))
+        topic = event_topic(line)
+        if self.events and self._last_topic == topic:
+            self._repeats += 1
+            self.events[-1] = f"{stamp}{line}  (x{self._repeats} on this topic)"
+            return
+        self._last_topic, self._repeats = topic, 1
+        self.events.append(stamp + line)
 
     def block(self) -> list[str]:
         doc = status_document(self.daemon, self._meter)

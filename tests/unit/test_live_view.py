@@ -55,3 +55,15 @@ def test_a_machine_line_shows_missing_values_as_none() -> None:
                                "values": [{"name": "Status/Run", "value": "STOP"}]}
     assert machine_line(machine, 4) == ("m1    30i-BM   OFFLINE    STOP  O(none)  S (none)  parts (none)  "
                                         "alarms: 1001 OVERHEAT  dropped: ReadMacros")
+
+
+def test_a_burst_on_one_topic_takes_one_line_so_births_stay_in_the_tail() -> None:
+    view = LiveView(daemon=None, out=io.StringIO(), tail=3, is_tty=False, clock=lambda: 0.0)  # type: ignore[arg-type]
+    view.on_line("DBIRTH gw/m1 seq=1 (30 metrics)")
+    for n in range(40):  # an alarm-history backlog read at connect
+        view.on_line(f"JSON   focas/m1/events/alarm = {{\"number\": {n}}}")
+    view.on_line("DBIRTH gw/m2 seq=2 (31 metrics)")
+    tail = [e.split(" ", 1)[1] for e in view.events]
+    assert tail == ["DBIRTH gw/m1 seq=1 (30 metrics)",
+                    "JSON   focas/m1/events/alarm = {\"number\": 39}  (x40 on this topic)",
+                    "DBIRTH gw/m2 seq=2 (31 metrics)"]
