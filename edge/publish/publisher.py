@@ -351,6 +351,7 @@ class Publisher:
         out["sparkplug_connects"] = self._spb.connects if self._spb is not None else 0
         out["json_connects"] = self._json.connects if self._json is not None else 0
         out["stale_state_ignored"] = self._host.ignored if self._host is not None else 0
+        out["bdseq_persist_failures"] = self._bdseq.persist_failures
         dropped = getattr(self.spool, "dropped", None)
         if isinstance(dropped, int):
             out["samples_dropped"] = dropped
