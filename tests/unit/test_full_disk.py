@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import sqlite3
 from pathlib import Path
 
 import pytest
 
 from edge.publish.bdseq import BdSeqCounter
+from edge.publish.spool import DiskSpool
 from edge.publish.state_store import StateStore
-from tests.small_disk import fill, small_disk
+from edge.samples import MetricType, Sample
+from tests.small_disk import disk_use, fill, small_disk
 
 
 def test_bdseq_on_a_full_disk_is_used_anyway_warned_and_counted(
@@ -27,3 +31,75 @@ def test_bdseq_on_a_full_disk_is_used_anyway_warned_and_counted(
         assert "bdSeq not persisted" in caplog.text
         assert (store.load("sparkplug_bdseq") or {}).get("last") == 0  # the last value that fit
         assert not [p for p in state.iterdir() if p.name.startswith(".")], "a temp file was left behind"
+
+
+def batch(i: int, metrics: int = 6) -> list[Sample]:
+    """About 260 bytes of payload: one tick of one machine."""
+    return [Sample(f"Macro/{500 + m}", float(i * 10 + m), MetricType.DOUBLE, 1_700_000_000_000 + i)
+            for m in range(metrics)]
+
+
+def spool_files(path: Path) -> list[Path]:
+    return [path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-journal"),
+            path.with_name(path.name + ".headroom")]
+
+
+def samples_left(spool: DiskSpool) -> int:
+    return sum(len(e.samples) for e in spool.oldest("sparkplug", 1_000_000))
+
+
+def rows_on_disk(path: Path) -> int:
+    with contextlib.closing(sqlite3.connect(str(path))) as db:
+        return int(db.execute("SELECT COUNT(*) FROM spool").fetchone()[0])
+
+
+def test_spool_on_a_full_1mb_disk_drops_oldest_counts_every_sample_and_logs_once(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    with small_disk(tmp_path / "state") as state:
+        spool = DiskSpool(state / "spool.sqlite")  # max_bytes (256 MiB) far above the disk
+        with caplog.at_level(logging.WARNING, logger="edge.publish.spool"):
+            for i in range(3000):
+                spool.hold("sparkplug", "m1", "data", batch(i))
+        assert spool.held == 3000 * 6
+        assert spool.dropped > 0, "a 1 MB disk cannot hold 3000 rows: something must have been dropped"
+        left = samples_left(spool)
+        assert spool.dropped + left == spool.held, "every sample is either waiting or counted as dropped"
+        newest = spool.oldest("sparkplug", 1_000_000)[-1]
+        assert newest.samples == batch(2999), "the newest rows are kept (oldest first is dropped)"
+        starts = [r for r in caplog.records if "spool full" in r.getMessage()]
+        assert len(starts) == 1, f"one log line per episode, got {len(starts)}"
+        spool.close()
+
+
+def test_acks_delete_rows_on_a_full_disk(tmp_path: Path) -> None:
+    with small_disk(tmp_path / "state") as state:
+        spool = DiskSpool(state / "spool.sqlite")
+        for i in range(3000):
+            spool.hold("sparkplug", "m1", "data", batch(i))
+        fill(state)  # whatever the spool left free is gone too
+        entries = spool.oldest("sparkplug", 100)
+        spool.ack([e.id for e in entries])
+        assert spool.oldest("sparkplug", 1)[0].id > entries[-1].id, "acked rows are never handed out again"
+        waiting = spool.pending()
+        assert rows_on_disk(state / "spool.sqlite") == waiting, "the acked rows were deleted on disk"
+        rest = spool.oldest("sparkplug", 1_000_000)
+        spool.ack([e.id for e in rest])
+        assert spool.pending() == 0 and rows_on_disk(state / "spool.sqlite") == 0
+        spool.close()
+
+
+def test_spool_disk_use_stays_within_max_bytes_counting_wal_and_journal(tmp_path: Path) -> None:
+    with small_disk(tmp_path / "state", "8m") as state:
+        path = state / "spool.sqlite"
+        spool = DiskSpool(path, max_bytes=1024 * 1024)
+        peak = 0
+        for i in range(5000):
+            spool.hold("sparkplug", "m1", "data", batch(i))
+            if i % 25 == 0:
+                peak = max(peak, disk_use(*spool_files(path)))
+        assert peak <= 1024 * 1024, f"spool files took {peak} bytes, max_bytes is 1 MiB"
+        assert spool.dropped > 0
+        assert spool.dropped + samples_left(spool) == spool.held
+        print(f"\nFIGURES spool 1 MiB bound: rows_kept={spool.pending()} peak_bytes={peak} "
+              f"dropped_samples={spool.dropped}")
+        spool.close()
