@@ -24,7 +24,9 @@ import pytest
 
 from edge.config import parse_config
 from edge.daemon import Daemon
+from edge.publish import payload as pl
 from edge.publish.forwarding import ForwardingPolicy
+from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
@@ -326,3 +328,53 @@ async def test_kill_9_during_buffering_and_during_replay_loses_nothing_and_state
     assert bdseqs == sorted(bdseqs) or 0 in bdseqs
     for d, aliases in aliases_before.items():
         assert birth_aliases(observer, d) == aliases
+
+
+async def test_replay_repeats_nothing_a_birth_or_live_data_already_carried(
+        mosquitto: Mosquitto, observer: Observer, fleet: Fleet, tmp_path: Path) -> None:
+    """Issue 16.10: after a rebirth and a primary-host offline/online, no historical DDATA repeats a value
+    (device, metric, CNC timestamp, value) the host already got live or in a DBIRTH."""
+    text = config_text(mosquitto.host, mosquitto.port, tmp_path, fleet, ", primary_host_id: scada")
+    state = "spBv1.0/STATE/scada"
+    rebirth = Payload(metrics=[Payload.Metric(name=pl.REBIRTH_METRIC, boolean_value=True)]).SerializeToString()
+    t0 = int(time.time() * 1000)
+    await observer.publish(state, json.dumps({"online": True, "timestamp": t0}).encode(), retain=True)
+    daemon, task, collected = await start(text)
+    daemon.publisher.settings.rebirth_min_interval_s = 1.0  # the second request waits: data is held
+    try:
+        await all_born(observer)
+        await observer.wait_count("DDATA", 20, timeout=15)
+        for count in (2, 3):  # two rebirths, the second held back by the minimum interval
+            await observer.publish("spBv1.0/plant/NCMD/gw", rebirth)
+            await observer.wait_topic("spBv1.0/plant/NBIRTH/gw", count=count, timeout=15)
+        await async_wait_for(lambda: daemon.publisher.counters["replayed_rows"] > 0, timeout=15,
+                             message="rows held by the rebirth replayed")
+        await observer.publish(state, json.dumps({"online": False, "timestamp": t0 + 1}).encode(), retain=True)
+        await async_wait_for(lambda: daemon.publisher.session_state != "born", timeout=10, message="NDEATH")
+        await async_wait_for(lambda: daemon.spool.pending("sparkplug") > 10, timeout=15,
+                             message="spooling while the host is offline")
+        await observer.publish(state, json.dumps({"online": True, "timestamp": t0 + 2}).encode(), retain=True)
+        await observer.wait_topic("spBv1.0/plant/NBIRTH/gw", count=4, timeout=15)
+        await async_wait_for(lambda: daemon.spool.pending("sparkplug") == 0, timeout=60, message="replayed")
+    finally:
+        await stop(daemon, task)
+        await observer.publish(state, b"", retain=True)
+    await wait_delivered(observer, collected)
+    arrivals = sparkplug_arrivals(observer.snapshot(), "plant", "gw")
+    verdict = compare(collected, arrivals)
+    assert not verdict.problems(), verdict.problems()
+    assert verdict.historical > 0, "nothing was replayed: the drill tested nothing"
+    seen: set[tuple[object, ...]] = set()
+    repeated = []  # historical DDATA metrics the host already had (live, in a DBIRTH or replayed before)
+    first: dict[object, tuple[int, object]] = {}
+    for i, a in enumerate(arrivals):
+        if a.historical and not a.birth and a.key in seen:
+            repeated.append(a.key)
+            if os.environ.get("DBG"):
+                print("DUP", a.key, "first", first[a.key], "now", i)
+        seen.add(a.key)
+        first.setdefault(a.key, (i, "birth" if a.birth else "hist" if a.historical else "live"))
+    skipped = daemon.publisher.counters.get("replay_duplicates_skipped")
+    print(f"\nFIGURES replay dedupe: historical={verdict.historical} repeated_by_replay={len(repeated)} "
+          f"skipped_at_replay={skipped}")
+    assert not repeated, f"{len(repeated)} values the host already had were replayed, e.g. {repeated[:3]}"
