@@ -472,8 +472,8 @@ class Publisher:
         self._node.session_lost()
         self._cancel_rebirth()
         mark = self._outbox["sparkplug"].mark()  # no live data after this: the node is not live
-        sent = self._delivered.mark()
-        if await self._publish_final(conn, ndeath):
+        sent = None if self._suspect["sparkplug"] else self._delivered.mark()
+        if await self._publish_final(conn, ndeath) and sent is not None:
             self._outbox["sparkplug"].confirm(mark)  # the NDEATH's PUBACK proves the data before it arrived
             self._delivered.proven(sent)
         await conn.stop(with_will=True)
@@ -669,14 +669,14 @@ class Publisher:
     async def _barrier(self, fmt: Format, conn: MqttConnection, *, drop_on_timeout: bool = True) -> bool:
         """Publish a QoS 1 probe and wait for its PUBACK: True means all sent before it arrived."""
         self._counters["probes"] += 1
-        sent = self._delivered.mark()
+        sent = None if self._suspect[fmt] else self._delivered.mark()
         try:
             await conn.publish_confirmed(self._probe_topic(fmt), b"", qos=1, retain=False,
                                          timeout=self.forwarding.probe_timeout_s)
         except MqttUnavailable as exc:
             self._suspect_dead(fmt, conn, str(exc), drop=drop_on_timeout)
             return False
-        if fmt == "sparkplug":
+        if fmt == "sparkplug" and sent is not None:
             self._delivered.proven(sent)
         return True
 
@@ -756,7 +756,8 @@ class Publisher:
                 done.append(entry.id)
                 samples = self._delivered.fresh(entry.device_id, entry.samples) if fmt == "sparkplug" \
                     else entry.samples
-                for m in self._historical_messages(fmt, entry, samples):
+                messages = self._historical_messages(fmt, entry, samples)
+                for m in messages:
                     if not current():
                         return
                     sent = self._send_spb([m], conn) if fmt == "sparkplug" else self._send_json(conn, m)
@@ -764,7 +765,7 @@ class Publisher:
                         self._suspect_dead(fmt, conn, "replay publish refused by the MQTT client")
                         return
                     self._counters["replayed_messages"] += 1
-                if fmt == "sparkplug":
+                if fmt == "sparkplug" and messages:
                     self._delivered.record(entry.device_id, samples)
                 await asyncio.sleep(pause)  # per row: a tick's worth of one machine
             if not current() or not await self._barrier(fmt, conn):

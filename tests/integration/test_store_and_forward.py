@@ -366,15 +366,11 @@ async def test_replay_repeats_nothing_a_birth_or_live_data_already_carried(
     assert verdict.historical > 0, "nothing was replayed: the drill tested nothing"
     seen: set[tuple[object, ...]] = set()
     repeated = []  # historical DDATA metrics the host already had (live, in a DBIRTH or replayed before)
-    first: dict[object, tuple[int, object]] = {}
-    for i, a in enumerate(arrivals):
+    for a in arrivals:
         if a.historical and not a.birth and a.key in seen:
             repeated.append(a.key)
-            if os.environ.get("DBG"):
-                print("DUP", a.key, "first", first[a.key], "now", i)
         seen.add(a.key)
-        first.setdefault(a.key, (i, "birth" if a.birth else "hist" if a.historical else "live"))
-    skipped = daemon.publisher.counters.get("replay_duplicates_skipped")
+    skipped = daemon.publisher.counters["replay_duplicates_skipped"]
     print(f"\nFIGURES replay dedupe: historical={verdict.historical} repeated_by_replay={len(repeated)} "
           f"skipped_at_replay={skipped}")
     assert not repeated, f"{len(repeated)} values the host already had were replayed, e.g. {repeated[:3]}"
