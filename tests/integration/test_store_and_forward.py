@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import signal
 import sqlite3
@@ -26,6 +27,7 @@ from edge.config import parse_config
 from edge.daemon import Daemon
 from edge.publish import payload as pl
 from edge.publish.forwarding import ForwardingPolicy
+from edge.publish.json_topics import GATEWAY, OFFLINE
 from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
 from edge.sim.fleet import Fleet, MachineSpec
@@ -40,6 +42,7 @@ from tests.integration.delivery import (
 )
 from tests.integration.mqtt_observer import Observer
 from tests.integration.tcp_relay import TcpRelay
+from tests.small_disk import fill, small_disk
 
 pytestmark = pytest.mark.integration
 
@@ -374,3 +377,70 @@ async def test_replay_repeats_nothing_a_birth_or_live_data_already_carried(
     print(f"\nFIGURES replay dedupe: historical={verdict.historical} repeated_by_replay={len(repeated)} "
           f"skipped_at_replay={skipped}")
     assert not repeated, f"{len(repeated)} values the host already had were replayed, e.g. {repeated[:3]}"
+
+
+async def test_full_disk_broker_outage_reconnects_at_once_bounds_the_spool_and_counts_every_drop(
+        mosquitto: Mosquitto, relay: TcpRelay, observer: Observer, fleet: Fleet, tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 16.6-8: state_dir on a 1 MB tmpfs, the broker away until the disk is full. The node is back as
+    soon as the broker is (bdSeq kept in memory), the spool drops the oldest samples and counts them all,
+    logs once, and drains what it kept after the births, deleting acknowledged rows on the full disk."""
+    caplog.set_level(logging.WARNING)
+    with small_disk(tmp_path / "state", "1m") as state:
+        daemon, task, collected = await start(config_text(relay.host, relay.port, state, fleet))
+        try:
+            await all_born(observer)
+            await observer.wait_count("DDATA", 20, timeout=15)
+            filler = fill(state)  # leave the spool a few hundred kB so the disk is full in seconds
+            filler.write_bytes(b"\0" * max(0, filler.stat().st_size - 384 * 1024))
+            collected.phase = "down"
+            relay.accepting = False
+            observer.expect_reconnect()
+            mosquitto.stop(kill=True)
+            await async_wait_for(lambda: daemon.spool.dropped > 0, timeout=60, message="the disk is full")
+            await async_wait_for(lambda: daemon.spool.dropped > 500, timeout=30, message="dropping")
+            fill(state, "filler2")  # and nothing at all is left for the bdSeq file
+            mosquitto.start()
+            await observer.wait_resubscribed()
+            collected.phase = "replay"
+            spooled_rows = daemon.spool.pending()
+            reopened = time.monotonic()
+            relay.accepting = True
+            await all_born(observer, count=2)
+            reconnect_s = time.monotonic() - reopened
+            await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=60, message="spool drained")
+            drained_s = time.monotonic() - reopened
+            collected.phase = "after"
+            await async_wait_for(lambda: collected.per_device.get("m1:after", 0) > 5, timeout=10,
+                                 message="live data after the replay")
+        finally:
+            deaths = len(observer.of("NDEATH"))
+            await stop(daemon, task)
+        disk_full_at_connect = daemon.publisher.counters["bdseq_persist_failures"]
+    # Dropped samples never arrive, so wait for the last message of each connection instead of for all.
+    await observer.wait_count("NDEATH", deaths + 1, timeout=10)
+    await async_wait_for(lambda: [m for m in observer.on(f"focas/{GATEWAY}/online") if m.payload == OFFLINE],
+                         timeout=10, message="the JSON connection's last message")
+    snap = observer.snapshot()
+    missing = 0
+    figures: dict[str, object] = {}
+    for fmt, arrivals in (("sparkplug", sparkplug_arrivals(snap, "plant", "gw")),
+                          ("json", json_arrivals(snap, "focas"))):
+        verdict = compare(collected, arrivals)
+        assert not verdict.unexpected and not verdict.out_of_order, verdict.problems()
+        missing += len(verdict.missing)
+        figures[f"{fmt}_delivered_historical"] = verdict.historical
+        figures[f"{fmt}_missing"] = len(verdict.missing)
+    spool = daemon.spool
+    figures.update(polled_during_outage=sum(1 for p in collected.keys.values() if p == "down"),
+                   spooled_samples=spool.held, dropped_samples=spool.dropped, spooled_rows_at_return=spooled_rows,
+                   reconnect_s=round(reconnect_s, 2), drained_s=round(drained_s, 2),
+                   bdseq_persist_failures=disk_full_at_connect)
+    print(f"\nFIGURES full disk: {json.dumps(figures)}")
+    assert disk_full_at_connect >= 1, "the CONNECT after the outage did not meet a full disk"
+    assert spool.dropped > 0 and missing <= spool.dropped, "a sample was lost without being counted"
+    episodes = [r for r in caplog.records if "spool full, dropping" in r.getMessage()]
+    assert len(episodes) == 1, f"one log line per drop episode, got {len(episodes)}"
+    failures = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR
+                and r.name.startswith("edge.publish")]
+    assert not failures, failures[:3]
