@@ -30,6 +30,7 @@ from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.json_topics import GATEWAY, OFFLINE
 from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
+from edge.samples import MetricType, Sample
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.delivery import (
@@ -444,3 +445,25 @@ async def test_full_disk_broker_outage_reconnects_at_once_bounds_the_spool_and_c
     failures = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR
                 and r.name.startswith("edge.publish")]
     assert not failures, failures[:3]
+
+
+async def test_rows_waiting_while_connected_are_drained_without_a_reconnect(
+        mosquitto: Mosquitto, observer: Observer, fleet: Fleet, tmp_path: Path) -> None:
+    """Issue 16.8: rows left in the spool while the session is up (a replay that ended early, a delete that
+    had no room) are replayed within a probe interval, not at the next reconnect."""
+    daemon, task, _ = await start(config_text(mosquitto.host, mosquitto.port, tmp_path, fleet))
+    try:
+        await all_born(observer)
+        await async_wait_for(lambda: daemon.publisher.counters["replayed_rows"] == 0 and
+                             not daemon.spool.pending(), timeout=10, message="settled")
+        connects = daemon.publisher.counters["sparkplug_connects"]
+        old = int(time.time() * 1000) - 3_600_000
+        for fmt in ("sparkplug", "json"):
+            daemon.spool.hold(fmt, "m1", "data", [Sample("Macro/500", 42.5, MetricType.DOUBLE, old)])
+        await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=10, message="waiting rows drained")
+        assert daemon.publisher.counters["sparkplug_connects"] == connects, "drained by a reconnect"
+        await async_wait_for(lambda: [a for a in sparkplug_arrivals(observer.snapshot(), "plant", "gw")
+                                      if a.key == ("m1", "Macro/500", old) and a.historical],
+                             timeout=10, message="the waiting row arrived as historical")
+    finally:
+        await stop(daemon, task)
