@@ -120,6 +120,19 @@ async def all_born(observer: Observer, count: int = 1) -> None:
         await observer.wait_topic(f"spBv1.0/plant/DBIRTH/gw/m{i + 1}", count=count, timeout=20)
 
 
+async def broker_back(mosquitto: Mosquitto, relay: TcpRelay, observer: Observer, collected: Collected,
+                      daemon: Daemon) -> tuple[int, float]:
+    """Restart the broker, let the daemon in once the test's subscriber is back: (rows waiting, when)."""
+    mosquitto.start()
+    await observer.wait_resubscribed()
+    collected.phase = "replay"
+    waiting = daemon.spool.pending()
+    reopened = time.monotonic()
+    relay.accepting = True
+    await all_born(observer, count=2)
+    return waiting, reopened
+
+
 async def wait_delivered(observer: Observer, collected: Collected) -> None:
     """Wait until every collected sample arrived in both formats (or fail with what is missing)."""
 
@@ -160,13 +173,7 @@ async def test_broker_outage_every_delta_arrives_once_in_order_historical_flagge
         mosquitto.stop(kill=True)
         await async_wait_for(lambda: daemon.spool.pending() > 0, timeout=10, message="spooling")
         await asyncio.sleep(max(0.0, OUTAGE_S - (time.monotonic() - killed)))  # the outage itself
-        mosquitto.start()
-        await observer.wait_resubscribed()
-        collected.phase = "replay"
-        spooled = daemon.spool.pending()
-        reopened = time.monotonic()
-        relay.accepting = True
-        await all_born(observer, count=2)
+        spooled, reopened = await broker_back(mosquitto, relay, observer, collected, daemon)
         born = time.monotonic()
         await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=60, message="spool replayed")
         replayed = time.monotonic()
@@ -401,13 +408,7 @@ async def test_full_disk_broker_outage_reconnects_at_once_bounds_the_spool_and_c
             await async_wait_for(lambda: daemon.spool.dropped > 0, timeout=60, message="the disk is full")
             await async_wait_for(lambda: daemon.spool.dropped > 500, timeout=30, message="dropping")
             fill(state, "filler2")  # and nothing at all is left for the bdSeq file
-            mosquitto.start()
-            await observer.wait_resubscribed()
-            collected.phase = "replay"
-            spooled_rows = daemon.spool.pending()
-            reopened = time.monotonic()
-            relay.accepting = True
-            await all_born(observer, count=2)
+            spooled_rows, reopened = await broker_back(mosquitto, relay, observer, collected, daemon)
             reconnect_s = time.monotonic() - reopened
             await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=60, message="spool drained")
             drained_s = time.monotonic() - reopened
