@@ -102,6 +102,8 @@ class DiskSpool:
         self.max_age_s = float(max_age_s)
         self._clock = clock
         self._lock = threading.Lock()
+        headroom_path = self.path.with_name(self.path.name + ".headroom")
+        headroom_path.unlink(missing_ok=True)  # the last run's headroom: room to open on a full disk
         self._db: sqlite3.Connection | None = sqlite3.connect(str(self.path), isolation_level=None,
                                                                check_same_thread=False)
         page_size = int(self._db.execute("PRAGMA page_size").fetchone()[0])
@@ -112,7 +114,7 @@ class DiskSpool:
         self._db.execute(f"PRAGMA journal_size_limit={self.budget.wal_bytes}")
         self._db.executescript(_SCHEMA)
         self._cap_pages(self.budget.db_pages)
-        self.headroom = Headroom(self.path.with_name(self.path.name + ".headroom"), self.budget.headroom_bytes)
+        self.headroom = Headroom(headroom_path, self.budget.headroom_bytes)
         self.headroom.take()
         self._rows: Counter[str] = Counter()
         self.bytes = 0
@@ -384,6 +386,44 @@ def _sample_count(body: bytes) -> int:
     return len(rows) if isinstance(rows, list) else 1
 
 
-def open_spool(state_dir: Path, max_bytes: int, max_age_s: float) -> DiskSpool:
-    """The daemon's spool: `spool.sqlite` in the state directory."""
-    return DiskSpool(Path(state_dir) / FILE_NAME, max_bytes=max_bytes, max_age_s=max_age_s)
+class UnopenedSpool:
+    """Stands in when the spool file cannot be opened (a disk with no byte left at start): what cannot be
+    published is counted as dropped, so the daemon runs and publishes live data; a restart retries."""
+
+    def __init__(self, path: Path, error: Exception) -> None:
+        self.path = path
+        self.error = error
+        self.dropped = 0
+        self.held = 0
+        self.depth = 0
+
+    def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None:
+        self.held += len(samples)
+        self.dropped += len(samples)
+
+    def pending(self, fmt: Format | None = None) -> int:
+        return 0
+
+    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
+        return []
+
+    def ack(self, ids: Sequence[int]) -> None:
+        return None
+
+    def flush(self) -> None:
+        return None
+
+    def close(self) -> None:
+        return None
+
+
+def open_spool(state_dir: Path, max_bytes: int, max_age_s: float) -> DiskSpool | UnopenedSpool:
+    """The daemon's spool: `spool.sqlite` in the state directory (or, if it cannot be opened, one that
+    counts what it cannot keep -- logged as an ERROR naming the file and the cause)."""
+    path = Path(state_dir) / FILE_NAME
+    try:
+        return DiskSpool(path, max_bytes=max_bytes, max_age_s=max_age_s)
+    except (sqlite3.Error, OSError) as exc:
+        log.error("spool cannot be opened, samples that cannot be published are dropped (counted) until a "
+                  "restart path=%s error=%s", path, exc)
+        return UnopenedSpool(path, exc)

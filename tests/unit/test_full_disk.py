@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from edge.publish.bdseq import BdSeqCounter
-from edge.publish.spool import DiskSpool
+from edge.publish.spool import DiskSpool, UnopenedSpool, open_spool
 from edge.publish.state_store import StateStore
 from edge.samples import MetricType, Sample
 from tests.small_disk import disk_use, fill, small_disk
@@ -103,3 +103,20 @@ def test_spool_disk_use_stays_within_max_bytes_counting_wal_and_journal(tmp_path
         print(f"\nFIGURES spool 1 MiB bound: rows_kept={spool.pending()} peak_bytes={peak} "
               f"dropped_samples={spool.dropped}")
         spool.close()
+
+
+def test_a_spool_that_cannot_be_opened_counts_drops_instead_of_stopping_the_daemon(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    with small_disk(tmp_path / "state") as state:
+        spool = open_spool(state, 256 * 1024 * 1024, 3600.0)
+        for i in range(3000):
+            spool.hold("sparkplug", "m1", "data", batch(i))
+        spool.close()
+        fill(state)  # not a byte left: SQLite cannot even create its WAL index
+        with caplog.at_level(logging.ERROR, logger="edge.publish.spool"):
+            again = open_spool(state, 256 * 1024 * 1024, 3600.0)
+            again.hold("sparkplug", "m1", "data", batch(1))
+        assert isinstance(again, UnopenedSpool), "the spool opened on a disk without a free byte?"
+        assert again.dropped == 6 and again.pending() == 0 and again.oldest("sparkplug", 10) == []
+        assert "spool cannot be opened" in caplog.text
+        again.close()
