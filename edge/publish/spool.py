@@ -242,10 +242,10 @@ class DiskSpool:
                            row)
                 return True
             except sqlite3.OperationalError as exc:
-                if not is_full(exc) or not self._make_room(db):
-                    if not is_full(exc):
-                        raise
-                    return False
+                if not is_full(exc):
+                    raise
+            if not self._make_room(db):
+                return False
         return False
 
     def _make_room(self, db: sqlite3.Connection) -> bool:
@@ -328,8 +328,9 @@ class DiskSpool:
             victims = db.execute("SELECT id, body FROM spool ORDER BY id LIMIT ?", (rows,)).fetchall()
         if not victims:
             return 0
+        delivered = {r[0] for r in victims if r[0] in self._acked}  # acknowledged: gone, but not lost
         self._delete(db, [r[0] for r in victims])
-        return sum(_sample_count(bytes(r[1])) for r in victims if r[0] not in self._acked)
+        return sum(_sample_count(bytes(r[1])) for r in victims if r[0] not in delivered)
 
     def _enforce_bounds(self, db: sqlite3.Connection) -> None:
         self._enforce_age(db)
