@@ -342,8 +342,9 @@ class DiskSpool:
             for row_id, body in victim:
                 if self.bytes <= self.max_bytes:
                     break
+                lost = row_id not in self._acked
                 self._delete(db, [row_id])
-                dropped += _sample_count(bytes(body))
+                dropped += _sample_count(bytes(body)) if lost else 0
             self._count_drops(dropped, "size")
         if not sum(self._rows.values()):
             self._end_episode()
@@ -353,8 +354,9 @@ class DiskSpool:
         rows = db.execute("SELECT id, body FROM spool WHERE created < ? ORDER BY id", (cutoff,)).fetchall()
         if not rows:
             return
+        lost = [r for r in rows if r[0] not in self._acked]
         self._delete(db, [r[0] for r in rows])
-        self._count_drops(sum(_sample_count(bytes(r[1])) for r in rows), "age")
+        self._count_drops(sum(_sample_count(bytes(r[1])) for r in lost), "age")
 
     def _count_drops(self, samples: int, reason: str) -> None:
         """Count dropped samples; one WARNING when an episode of drops starts (it ends when the spool drains)."""
