@@ -771,6 +771,11 @@ class Publisher:
             if not current() or not await self._barrier(fmt, conn):
                 return
             spool.ack(done)
+            if fmt == "sparkplug":
+                acked = set(done)
+                for entry in entries:
+                    if entry.id in acked:
+                        self._delivered.discard(entry.device_id, entry.samples)
             self._counters["replayed_rows"] += len(done)
             sent_rows += len(done)
         left = spool.pending(fmt)

@@ -11,7 +11,9 @@ sample found in either set:
 - proven: it arrived (the barrier's PUBACK covers everything sent before it on that connection);
 - sent on the current connection: the row is only acknowledged after a barrier on this same connection,
   which will prove the earlier copy too. A new connection forgets what was sent but not proven.
-Both are forgotten when the spool has nothing left to replay (no row can repeat them then).
+A replayed row's samples are forgotten once the row is acknowledged (it cannot come back), so the record
+stays the size of the births, the unconfirmed live batches and one replay batch; everything is forgotten
+when the spool has nothing left to replay.
 """
 
 from __future__ import annotations
@@ -62,6 +64,13 @@ class DeliveredValues:
         self._proven.update(done)
         for key in done:
             del self._sent[key]
+
+    def discard(self, device_id: str, samples: Iterable[Sample]) -> None:
+        """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory."""
+        for s in samples:
+            key = (device_id, s.name, s.timestamp_ms, value_key(s.value))
+            self._sent.pop(key, None)
+            self._proven.discard(key)
 
     def connection_lost(self) -> None:
         """What the old connection sent without proof may not have arrived."""

@@ -42,3 +42,11 @@ def test_values_compare_as_the_spool_stores_them() -> None:
     d = DeliveredValues()
     d.record("m1", [Sample("Alarm/Event", {"b": 1, "a": [2]}, MetricType.STRING, 5)])
     assert d.fresh("m1", [Sample("Alarm/Event", {"a": [2], "b": 1}, MetricType.STRING, 5)]) == []
+
+
+def test_an_acknowledged_rows_samples_are_forgotten() -> None:
+    d = DeliveredValues()
+    d.record("m1", [s(1), s(2)])
+    d.proven(d.mark())
+    d.discard("m1", [s(1)])
+    assert len(d) == 1 and d.fresh("m1", [s(1), s(2)]) == [s(1)]
