@@ -84,9 +84,13 @@ def assess_health(daemon: DaemonView, healthy_share: float) -> Health:
 # ---- metrics --------------------------------------------------------------------------------------------
 
 
+# Publisher figures that go down as well as up are gauges, never counters (a counter that falls reads as a
+# reset). spool_rows is focas_edge_spool_depth.
+PUBLISHER_GAUGES = {"unconfirmed_batches": "live batches sent but not yet confirmed by a delivery barrier"}
+
+
 def spool_depth(daemon: DaemonView) -> int:
-    """Samples waiting in the store-and-forward spool. Hook: the disk spool (another issue) exposes
-    `depth`; until then the spool drops what it cannot send and the depth is 0."""
+    """Rows waiting in the store-and-forward spool (the disk spool's `depth`; 0 for a spool that only drops)."""
     depth = getattr(daemon.publisher.spool, "depth", 0)
     return int(depth() if callable(depth) else depth)
 
@@ -118,7 +122,8 @@ class DaemonCollector:
         yield broker
         yield from self._machine_metrics(pollers)
         yield from self._publish_metrics(publisher)
-        spool = GaugeMetricFamily("focas_edge_spool_depth", "samples waiting in the store-and-forward spool")
+        spool = GaugeMetricFamily("focas_edge_spool_depth", "rows (one tick of one machine) waiting in the "
+                                  "store-and-forward spool")
         spool.add_metric([], spool_depth(self.daemon))
         yield spool
         writes = CounterMetricFamily("focas_edge_writes", "remote writes by outcome", labels=["outcome"])
@@ -161,6 +166,11 @@ class DaemonCollector:
         for outcome in ("published", "dropped"):
             messages.add_metric([outcome], float(counters.pop(outcome, 0)))
         yield messages
+        counters.pop("spool_rows", None)
+        for name, help_text in PUBLISHER_GAUGES.items():
+            gauge = GaugeMetricFamily(f"focas_edge_{name}", help_text)
+            gauge.add_metric([], float(counters.pop(name, 0)))
+            yield gauge
         events = CounterMetricFamily("focas_edge_publisher_events", "publisher events (births, rebirths, "
                                      "commands, connects, ...)", labels=["event"])
         for name, count in sorted(counters.items()):

@@ -75,5 +75,9 @@ class AliasMap:
         """Persist the map if it grew since the last save."""
         if not self._dirty or self._store is None:
             return
-        self._store.save(DOCUMENT, {"version": 1, "devices": self._devices})
+        try:
+            self._store.save(DOCUMENT, {"version": 1, "devices": self._devices})
+        except OSError as exc:  # a full disk: the map in memory stays right; the next save tries again
+            log.warning("alias map not persisted, kept in memory error=%s", exc)
+            return
         self._dirty = False

@@ -177,6 +177,16 @@ class SparkplugNode:
             out.extend(self.device_events(device_id, events))
         return out
 
+    def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
+        """The device values births carry (each online device's latest, or one device's), then any events
+        a rebirth held: what the next births() (or that device's DBIRTH) will send."""
+        if device_id is not None:
+            dev = self._devices.get(device_id)
+            return [(device_id, list(dev.last.values()))] if dev is not None and dev.online else []
+        out = [(d, list(dev.last.values())) for d, dev in self._devices.items() if dev.online]
+        out.extend((d, list(events)) for d, events in self._held_events)
+        return out
+
     def _add_birth_metrics(self, p: Payload, dev: _Device, ts: int) -> None:
         for name, spec in dev.specs.items():
             sample = dev.last.get(name)

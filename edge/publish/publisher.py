@@ -36,6 +36,7 @@ from edge.publish.node import (
     now_ms,
 )
 from edge.publish.primary_host import PrimaryHost, StateVerdict
+from edge.publish.replay_dedupe import DeliveredValues
 from edge.publish.settings import PublishSettings
 from edge.publish.state_store import StateStore
 from edge.samples import MetricSpec, Sample
@@ -120,6 +121,8 @@ class Publisher:
         self._replaying: dict[Format, bool] = {"sparkplug": False, "json": False}
         self._replay_again: dict[Format, bool] = {"sparkplug": False, "json": False}
         self._json_session = 0
+        self._spool_failing = False  # a spool write failed and no write has worked since (log once)
+        self._delivered = DeliveredValues()  # what this Sparkplug connection sent: replay skips it
         # Sparkplug
         self._sparkplug = "sparkplug" in settings.formats
         self._bdseq = BdSeqCounter(store)
@@ -243,13 +246,19 @@ class Publisher:
     async def _confirm_then_disconnect(self, conn: MqttConnection, last: Outgoing | None,
                                        *, with_will: bool) -> None:
         if last is not None:
-            try:
-                await conn.publish_confirmed(last.topic, last.payload, qos=1, retain=last.retain, timeout=5.0)
-                self._counters["published"] += 1
-            except MqttUnavailable as exc:
-                self._counters["dropped"] += 1
-                log.warning("final message not confirmed topic=%s error=%s", last.topic, exc)
+            await self._publish_final(conn, last)
         await conn.stop(with_will=with_will)
+
+    async def _publish_final(self, conn: MqttConnection, last: Outgoing) -> bool:
+        """Publish the last message before a disconnect at QoS 1; True once its PUBACK came."""
+        try:
+            await conn.publish_confirmed(last.topic, last.payload, qos=1, retain=last.retain, timeout=5.0)
+        except MqttUnavailable as exc:
+            self._counters["dropped"] += 1
+            log.warning("final message not confirmed topic=%s error=%s", last.topic, exc)
+            return False
+        self._counters["published"] += 1
+        return True
 
     # -- what the collector calls --------------------------------------------------------------------
 
@@ -262,7 +271,10 @@ class Publisher:
                             samples: Sequence[Sample]) -> None:
         """A machine's session is up: DBIRTH with every metric; JSON online + retained state."""
         if self._sparkplug:
-            self._send_spb(self._node.device_online(device_id, specs, samples))
+            births = self._node.device_online(device_id, specs, samples)
+            if self._send_spb(births) and births:
+                for born_id, values in self._node.birth_samples(device_id):
+                    self._delivered.record(born_id, values)
             if self._node.live:
                 self._kick_replay("sparkplug")  # rows this device left in the spool
         if self._topics is not None:
@@ -357,6 +369,8 @@ class Publisher:
         out["sparkplug_connects"] = self._spb.connects if self._spb is not None else 0
         out["json_connects"] = self._json.connects if self._json is not None else 0
         out["stale_state_ignored"] = self._host.ignored if self._host is not None else 0
+        out["bdseq_persist_failures"] = self._bdseq.persist_failures
+        out["replay_duplicates_skipped"] = self._delivered.skipped
         dropped = getattr(self.spool, "dropped", None)
         if isinstance(dropped, int):
             out["samples_dropped"] = dropped
@@ -385,6 +399,7 @@ class Publisher:
         self._spb_session += 1
         self._subscribed = False
         self._suspect["sparkplug"] = False
+        self._delivered.connection_lost()
         self._node.session_started(tag)
         if self._host is not None:
             self._host.new_session()
@@ -419,7 +434,7 @@ class Publisher:
             log.info("waiting for primary host STATE online host=%s", self._host.host_id)
             return
         self._counters["births"] += 1
-        self._send_spb(self._births())
+        self._send_births()
         self._kick_replay("sparkplug")
 
     def _births(self) -> list[Outgoing]:
@@ -434,6 +449,7 @@ class Publisher:
         self._subscribed = False
         self._cancel_rebirth()
         self._node.session_lost()
+        self._delivered.connection_lost()
 
     def _spb_message(self, msg: InboundMessage) -> None:
         if self._host is not None and msg.topic == self._host.topic:
@@ -471,7 +487,12 @@ class Publisher:
         ndeath = self._node.ndeath()
         self._node.session_lost()
         self._cancel_rebirth()
-        await self._confirm_then_disconnect(conn, ndeath, with_will=True)
+        mark = self._outbox["sparkplug"].mark()  # no live data after this: the node is not live
+        sent = None if self._suspect["sparkplug"] else self._delivered.mark()
+        if await self._publish_final(conn, ndeath) and sent is not None:
+            self._outbox["sparkplug"].confirm(mark)  # the NDEATH's PUBACK proves the data before it arrived
+            self._delivered.proven(sent)
+        await conn.stop(with_will=True)
         if not self._stopping and self._spb is conn:
             conn.start()
 
@@ -492,8 +513,15 @@ class Publisher:
             return
         self._last_rebirth = time.monotonic()
         self._counters["rebirths"] += 1
-        self._send_spb(self._births())
+        self._send_births()
         self._kick_replay("sparkplug")
+
+    def _send_births(self) -> None:
+        """NBIRTH and the DBIRTHs; what they carry is recorded so the replay does not repeat it."""
+        carried = self._node.birth_samples()
+        if self._send_spb(self._births()):
+            for device_id, samples in carried:
+                self._delivered.record(device_id, samples)
 
     def _cancel_rebirth(self) -> None:
         if self._rebirth_handle is not None:
@@ -617,15 +645,25 @@ class Publisher:
         kind: SampleKind = "events" if batch.kind == "events" else "data"
         try:
             self.spool.hold(fmt, batch.device_id, kind, batch.samples)
-        except Exception as exc:  # a full disk must not take the publisher down
+        except Exception as exc:  # a broken spool must not take the publisher down
             self._counters["spool_errors"] += 1
-            log.error("spool write failed, samples lost format=%s device=%s samples=%d error=%s", fmt,
-                      batch.device_id, len(batch.samples), exc)
+            self._counters["spool_error_samples"] += len(batch.samples)
+            if not self._spool_failing:
+                log.error("spool write failed, samples lost until a write works again (counted in "
+                          "spool_error_samples) format=%s device=%s samples=%d error=%s", fmt,
+                          batch.device_id, len(batch.samples), exc)
+            self._spool_failing = True
             return
+        if self._spool_failing:
+            log.warning("spool writes work again, lost samples=%d", self._counters["spool_error_samples"])
+        self._spool_failing = False
         self._counters["spooled_batches"] += 1
 
     def _spool_outbox(self, fmt: Format) -> None:
+        """Unconfirmed live batches to the spool; they went out, so a replay on this connection skips them."""
         for batch in self._outbox[fmt].take_all():
+            if fmt == "sparkplug":
+                self._delivered.record(batch.device_id, batch.samples)
             self._spool_batch(fmt, batch)
 
     def _suspect_dead(self, fmt: Format, conn: MqttConnection, reason: str, drop: bool = True) -> None:
@@ -647,12 +685,15 @@ class Publisher:
     async def _barrier(self, fmt: Format, conn: MqttConnection, *, drop_on_timeout: bool = True) -> bool:
         """Publish a QoS 1 probe and wait for its PUBACK: True means all sent before it arrived."""
         self._counters["probes"] += 1
+        sent = None if self._suspect[fmt] else self._delivered.mark()
         try:
             await conn.publish_confirmed(self._probe_topic(fmt), b"", qos=1, retain=False,
                                          timeout=self.forwarding.probe_timeout_s)
         except MqttUnavailable as exc:
             self._suspect_dead(fmt, conn, str(exc), drop=drop_on_timeout)
             return False
+        if fmt == "sparkplug" and sent is not None:
+            self._delivered.proven(sent)
         return True
 
     async def _probe_loop(self, fmt: Format, conn: MqttConnection, session: int) -> None:
@@ -662,12 +703,23 @@ class Publisher:
             await asyncio.sleep(self.forwarding.probe_interval_s)
             if session != self._session(fmt) or self._suspect[fmt] or not conn.connected:
                 return
+            self._drain_waiting_rows(fmt)
             if not len(outbox):
                 continue
             mark = outbox.mark()
             if not await self._barrier(fmt, conn):
                 return
             outbox.confirm(mark)
+
+    def _drain_waiting_rows(self, fmt: Format) -> None:
+        """Rows still waiting with no replay running (a replay that failed, a spool that had no room to
+        delete): replay them now, not at the next reconnect."""
+        spool = self.spool
+        if self._replaying[fmt] or not isinstance(spool, ReplaySpool) or (fmt == "sparkplug" and
+                                                                          not self._node.live):
+            return
+        if spool.pending(fmt):
+            self._kick_replay(fmt)
 
     def _kick_replay(self, fmt: Format) -> None:
         """Start replaying the spool for `fmt` (or make the running replay look again)."""
@@ -686,6 +738,9 @@ class Publisher:
     async def _replay(self, fmt: Format, conn: MqttConnection, session: int) -> None:
         try:
             await self._replay_rows(fmt, conn, session)
+        except Exception as exc:  # the spool failed: the rows stay and the probe loop kicks a new replay
+            self._counters["replay_errors"] += 1
+            log.error("spool replay failed, retried within a probe interval format=%s error=%s", fmt, exc)
         finally:
             self._replaying[fmt] = False
 
@@ -715,7 +770,10 @@ class Publisher:
                 if fmt == "sparkplug" and not self._node.is_online(entry.device_id):
                     continue  # went offline since the query: its rows wait for its next DBIRTH
                 done.append(entry.id)
-                for m in self._historical_messages(fmt, entry):
+                samples = self._delivered.fresh(entry.device_id, entry.samples) if fmt == "sparkplug" \
+                    else entry.samples
+                messages = self._historical_messages(fmt, entry, samples)
+                for m in messages:
                     if not current():
                         return
                     sent = self._send_spb([m], conn) if fmt == "sparkplug" else self._send_json(conn, m)
@@ -723,18 +781,30 @@ class Publisher:
                         self._suspect_dead(fmt, conn, "replay publish refused by the MQTT client")
                         return
                     self._counters["replayed_messages"] += 1
+                if fmt == "sparkplug" and messages:
+                    self._delivered.record(entry.device_id, samples)
                 await asyncio.sleep(pause)  # per row: a tick's worth of one machine
             if not current() or not await self._barrier(fmt, conn):
                 return
             spool.ack(done)
+            if fmt == "sparkplug":
+                acked = set(done)
+                for entry in entries:
+                    if entry.id in acked:
+                        self._delivered.discard(entry.device_id, entry.samples)
             self._counters["replayed_rows"] += len(done)
             sent_rows += len(done)
+        left = spool.pending(fmt)
+        if fmt == "sparkplug" and not left:
+            self._delivered.forget()
         if sent_rows:
             log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
-                     time.monotonic() - started, spool.pending(fmt))
+                     time.monotonic() - started, left)
 
-    def _historical_messages(self, fmt: Format, entry: Any) -> list[Outgoing]:
-        samples = [s if s.historical else replace(s, historical=True) for s in entry.samples]
+    def _historical_messages(self, fmt: Format, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
+        if not samples:
+            return []
+        samples = [s if s.historical else replace(s, historical=True) for s in samples]
         if fmt == "sparkplug":
             return self._node.historical_data(entry.device_id, samples)
         topics = self._topics

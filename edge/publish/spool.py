@@ -5,11 +5,17 @@ row id. A committed row survives kill -9 (WAL, synchronous=NORMAL; a power cut m
 commits). Rows leave the spool only when the publisher acknowledges them after a delivery barrier, so a
 crash during replay sends them again: at-least-once, consumers drop duplicates by key (docs/reliability.md).
 
-Bounds and drop policy (both counted in `dropped`, logged once per burst):
+Bounds and drop policy (every dropped sample counted in `dropped`, logged once per episode):
 - age: rows spooled more than `max_age_s` ago are deleted, oldest first;
-- size: when the payload bytes would exceed `max_bytes`, the oldest *data* rows go first; alarm events are
-  kept as long as any data row is left to drop, then the oldest events go. The newest values are never
-  lost by this: births always carry each metric's latest value.
+- disk: the files (database + WAL + journal + the headroom file) stay within `max_bytes` (edge.publish.
+  spool_disk.DiskBudget: a page cap on the database, a checkpointed and size-limited WAL) and within the
+  disk itself. When a row does not fit (the cap or a full disk: SQLITE_FULL), the oldest rows are dropped
+  to make room, by the same order as for size;
+- size: the payload bytes stay within `max_bytes` too (what bounds a tiny spool);
+- order: the oldest *data* rows go first; alarm events are kept as long as any data row is left to drop,
+  then the oldest events go. The newest values are never lost by this: births carry each latest value.
+A DELETE needs WAL space, so a headroom file is released when the disk is full; acknowledged rows that
+still cannot be deleted are remembered and never replayed again, and their delete is retried.
 """
 
 from __future__ import annotations
@@ -19,11 +25,13 @@ import logging
 import sqlite3
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from edge.publish.spool_disk import DiskBudget, Headroom, disk_budget, filesystem_bytes, is_full
 from edge.samples import MetricType, Quality, Sample
 
 log = logging.getLogger(__name__)
@@ -79,7 +87,8 @@ class DiskSpool:
     """The `Spool` the publisher holds undeliverable samples in, with replay reads and acks.
 
     Used from the event loop thread only (each call is one short transaction); a lock guards against
-    accidental use from another thread.
+    accidental use from another thread. A full disk never raises out of hold() or ack(): it drops by the
+    policy (counted) or keeps an ack to retry.
     """
 
     def __init__(self, path: Path, *, max_bytes: int = 256 * 1024 * 1024, max_age_s: float = 7 * 24 * 3600.0,
@@ -93,45 +102,66 @@ class DiskSpool:
         self.max_age_s = float(max_age_s)
         self._clock = clock
         self._lock = threading.Lock()
+        headroom_path = self.path.with_name(self.path.name + ".headroom")
+        headroom_path.unlink(missing_ok=True)  # the last run's headroom: room to open on a full disk
         self._db: sqlite3.Connection | None = sqlite3.connect(str(self.path), isolation_level=None,
                                                                check_same_thread=False)
+        page_size = int(self._db.execute("PRAGMA page_size").fetchone()[0])
+        self.budget: DiskBudget = disk_budget(self.max_bytes, page_size, filesystem_bytes(self.path.parent))
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.execute(f"PRAGMA wal_autocheckpoint={self.budget.wal_checkpoint_pages}")
+        self._db.execute(f"PRAGMA journal_size_limit={self.budget.wal_bytes}")
         self._db.executescript(_SCHEMA)
-        row = self._db.execute("SELECT COUNT(*), COALESCE(SUM(size), 0) FROM spool").fetchone()
-        self._rows, self.bytes = int(row[0]), int(row[1])
+        self._cap_pages(self.budget.db_pages)
+        self.headroom = Headroom(headroom_path, self.budget.headroom_bytes)
+        self.headroom.take()
+        self._rows: Counter[str] = Counter()
+        self.bytes = 0
+        for fmt, count, size in self._db.execute("SELECT fmt, COUNT(*), COALESCE(SUM(size), 0) FROM spool "
+                                                  "GROUP BY fmt"):
+            self._rows[str(fmt)] = int(count)
+            self.bytes += int(size)
+        self._acked: dict[int, str] = {}  # acknowledged rows whose DELETE failed (full disk): id -> format
         self.dropped = 0  # samples lost to the bounds (or unreadable rows), since this process started
-        self.held = 0  # samples accepted by hold()
-        self._dropping = False  # inside a burst of drops (log once per burst)
+        self.held = 0  # samples given to hold() (kept or dropped)
+        self._episode_dropped: int | None = None  # samples dropped in the current drop episode, or None
         if self._rows:
-            log.info("spool opened with rows waiting path=%s rows=%d bytes=%d", self.path, self._rows,
-                     self.bytes)
+            log.info("spool opened with rows waiting path=%s rows=%d bytes=%d", self.path,
+                     sum(self._rows.values()), self.bytes)
 
     # -- the Spool protocol --------------------------------------------------------------------------
 
     def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None:
-        """Append one batch (committed before returning), then enforce the bounds."""
+        """Append one batch (committed before returning), dropping the oldest rows when it does not fit."""
         if not samples:
             return
         body = encode_samples(samples)
         with self._lock:
             db = self._conn()
-            db.execute("INSERT INTO spool (fmt, device, kind, created, size, body) VALUES (?, ?, ?, ?, ?, ?)",
-                       (fmt, device_id, kind, self._clock(), len(body), body))
-            self._rows += 1
-            self.bytes += len(body)
+            self._retry_acked(db)
             self.held += len(samples)
+            if not self._insert(db, (fmt, device_id, kind, self._clock(), len(body), body)):
+                self._count_drops(len(samples), "disk")  # nothing older left to drop, or no delete fits
+                return
+            self._rows[fmt] += 1
+            self.bytes += len(body)
             self._enforce_bounds(db)
+            self._recover_headroom()
 
     # -- replay --------------------------------------------------------------------------------------
 
+    @property
+    def depth(self) -> int:
+        """Rows waiting to be replayed (both formats): the spool-depth gauge."""
+        return self.pending()
+
     def pending(self, fmt: Format | None = None) -> int:
-        """Rows waiting (for one format, or all)."""
+        """Rows waiting (for one format, or all); acknowledged rows not yet deleted are not waiting."""
         with self._lock:
-            db = self._conn()
             if fmt is None:
-                return self._rows
-            return int(db.execute("SELECT COUNT(*) FROM spool WHERE fmt = ?", (fmt,)).fetchone()[0])
+                return sum(self._rows.values()) - len(self._acked)
+            return self._rows[fmt] - sum(1 for f in self._acked.values() if f == fmt)
 
     def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
         """Up to `limit` rows of one format, oldest first; only those `devices` if given.
@@ -140,19 +170,23 @@ class DiskSpool:
         """
         with self._lock:
             db = self._conn()
+            self._retry_acked(db)
             self._enforce_age(db)
+            want = limit + len(self._acked)
             if devices is None:
                 rows = db.execute("SELECT id, device, kind, body FROM spool WHERE fmt = ? ORDER BY id LIMIT ?",
-                                  (fmt, limit)).fetchall()
+                                  (fmt, want)).fetchall()
             else:
                 wanted = sorted(devices)
                 if not wanted:
                     return []
                 marks = ",".join("?" * len(wanted))
                 rows = db.execute(f"SELECT id, device, kind, body FROM spool WHERE fmt = ? AND device IN "
-                                  f"({marks}) ORDER BY id LIMIT ?", (fmt, *wanted, limit)).fetchall()
+                                  f"({marks}) ORDER BY id LIMIT ?", (fmt, *wanted, want)).fetchall()
             out: list[SpoolEntry] = []
             for row_id, device, kind, body in rows:
+                if row_id in self._acked or len(out) >= limit:
+                    continue
                 try:
                     samples = decode_samples(bytes(body))
                 except ValueError as exc:
@@ -165,24 +199,31 @@ class DiskSpool:
             return out
 
     def ack(self, ids: Sequence[int]) -> None:
-        """These rows reached the broker: delete them."""
+        """These rows reached the broker: delete them (or, on a full disk, never hand them out again)."""
         if not ids:
             return
         with self._lock:
-            self._delete(self._conn(), list(ids))
+            db = self._conn()
+            marks = ",".join("?" * len(ids))
+            for row_id, fmt in db.execute(f"SELECT id, fmt FROM spool WHERE id IN ({marks})", list(ids)):
+                self._acked[int(row_id)] = str(fmt)
+            self._retry_acked(db)
+            self._recover_headroom()
+            if not sum(self._rows.values()):
+                self._end_episode()
 
     def flush(self) -> None:
         """Checkpoint the WAL into the main file (shutdown; every hold is already committed)."""
         with self._lock:
             if self._db is not None:
-                self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                self._checkpoint(self._db, "TRUNCATE")
 
     def close(self) -> None:
         with self._lock:
             db, self._db = self._db, None
             if db is not None:
                 try:
-                    db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                    self._checkpoint(db, "TRUNCATE")
                 finally:
                     db.close()
 
@@ -193,48 +234,151 @@ class DiskSpool:
             raise RuntimeError(f"spool {self.path} is closed")
         return self._db
 
+    def _insert(self, db: sqlite3.Connection, row: tuple[object, ...]) -> bool:
+        """INSERT the row; on SQLITE_FULL drop the oldest rows to make room and try again."""
+        for _ in range(_ROOM_ATTEMPTS):
+            try:
+                db.execute("INSERT INTO spool (fmt, device, kind, created, size, body) VALUES (?, ?, ?, ?, ?, ?)",
+                           row)
+                return True
+            except sqlite3.OperationalError as exc:
+                if not is_full(exc):
+                    raise
+            if not self._make_room(db):
+                return False
+        return False
+
+    def _make_room(self, db: sqlite3.Connection) -> bool:
+        """The row did not fit: stop the file growing, free the headroom, drop the oldest rows."""
+        self._cap_pages(int(db.execute("PRAGMA page_count").fetchone()[0]))  # reuse freed pages from now
+        self.headroom.release()
+        try:
+            dropped = self._drop_oldest(db, _ROOM_ROWS)
+        except sqlite3.OperationalError as exc:
+            if not is_full(exc):
+                raise
+            return False
+        self._checkpoint(db, "PASSIVE")
+        self._count_drops(dropped, "disk")
+        return dropped > 0
+
+    def _recover_headroom(self) -> None:
+        """After a full disk: take the headroom back, and the configured cap once the disk has room again."""
+        if self.headroom.held or not self.headroom.take():
+            return
+        if self.headroom.disk_free() >= 2 * self.budget.headroom_bytes:
+            self._cap_pages(self.budget.db_pages)
+
+    def _cap_pages(self, pages: int) -> None:
+        self._conn().execute(f"PRAGMA max_page_count={max(int(pages), 1)}")
+
+    def _checkpoint(self, db: sqlite3.Connection, mode: str) -> None:
+        try:
+            db.execute(f"PRAGMA wal_checkpoint({mode})")
+        except sqlite3.OperationalError as exc:
+            if not is_full(exc):
+                raise
+            log.debug("spool checkpoint postponed: disk full")
+
+    def _retry_acked(self, db: sqlite3.Connection) -> None:
+        """Delete acknowledged rows in small transactions, each checkpointed, so the WAL stays small; on a
+        full disk free the headroom and try once more, else keep the rest for the next call."""
+        ids = sorted(self._acked)
+        for start in range(0, len(ids), _ROOM_ROWS * 4):
+            chunk = ids[start:start + _ROOM_ROWS * 4]
+            try:
+                self._delete(db, chunk)
+            except sqlite3.OperationalError as exc:
+                if not is_full(exc):
+                    raise
+                if not (self.headroom.release() and self._fits(db, chunk)):
+                    log.debug("acknowledged spool rows kept for a later delete: disk full rows=%d",
+                              len(self._acked))
+                    return
+            self._checkpoint(db, "PASSIVE")
+
+    def _fits(self, db: sqlite3.Connection, ids: list[int]) -> bool:
+        """Try the delete once more after the headroom went: True if it went through."""
+        try:
+            self._delete(db, ids)
+        except sqlite3.OperationalError as exc:
+            if not is_full(exc):
+                raise
+            return False
+        return True
+
     def _delete(self, db: sqlite3.Connection, ids: list[int]) -> None:
         for start in range(0, len(ids), 500):
             chunk = ids[start:start + 500]
             marks = ",".join("?" * len(chunk))
-            row = db.execute(f"SELECT COUNT(*), COALESCE(SUM(size), 0) FROM spool WHERE id IN ({marks})",
-                             chunk).fetchone()
+            gone = db.execute(f"SELECT fmt, COUNT(*), COALESCE(SUM(size), 0) FROM spool WHERE id IN ({marks}) "
+                              f"GROUP BY fmt", chunk).fetchall()
             db.execute(f"DELETE FROM spool WHERE id IN ({marks})", chunk)
-            self._rows -= int(row[0])
-            self.bytes -= int(row[1])
+            for fmt, count, size in gone:
+                self._rows[str(fmt)] -= int(count)
+                self.bytes -= int(size)
+            for row_id in chunk:
+                self._acked.pop(row_id, None)
+
+    def _drop_oldest(self, db: sqlite3.Connection, rows: int) -> int:
+        """Delete up to `rows` of the oldest rows by the policy (data before events); samples dropped."""
+        victims = db.execute("SELECT id, body FROM spool WHERE kind = 'data' ORDER BY id LIMIT ?",
+                             (rows,)).fetchall()
+        if not victims:
+            victims = db.execute("SELECT id, body FROM spool ORDER BY id LIMIT ?", (rows,)).fetchall()
+        if not victims:
+            return 0
+        delivered = {r[0] for r in victims if r[0] in self._acked}  # acknowledged: gone, but not lost
+        self._delete(db, [r[0] for r in victims])
+        return sum(_sample_count(bytes(r[1])) for r in victims if r[0] not in delivered)
 
     def _enforce_bounds(self, db: sqlite3.Connection) -> None:
-        dropped = self._enforce_age(db)
-        while self.bytes > self.max_bytes and self._rows > 0:
+        self._enforce_age(db)
+        while self.bytes > self.max_bytes and sum(self._rows.values()) > 0:
             victim = db.execute("SELECT id, body FROM spool WHERE kind = 'data' ORDER BY id LIMIT 64").fetchall()
             if not victim:
                 victim = db.execute("SELECT id, body FROM spool ORDER BY id LIMIT 64").fetchall()
+            dropped = 0
             for row_id, body in victim:
                 if self.bytes <= self.max_bytes:
                     break
+                lost = row_id not in self._acked
                 self._delete(db, [row_id])
-                dropped += _sample_count(bytes(body))
-        self._count_drops(dropped, "size")
+                dropped += _sample_count(bytes(body)) if lost else 0
+            self._count_drops(dropped, "size")
+        if not sum(self._rows.values()):
+            self._end_episode()
 
-    def _enforce_age(self, db: sqlite3.Connection) -> int:
+    def _enforce_age(self, db: sqlite3.Connection) -> None:
         cutoff = self._clock() - self.max_age_s
         rows = db.execute("SELECT id, body FROM spool WHERE created < ? ORDER BY id", (cutoff,)).fetchall()
         if not rows:
-            return 0
+            return
+        lost = [r for r in rows if r[0] not in self._acked]
         self._delete(db, [r[0] for r in rows])
-        dropped = sum(_sample_count(bytes(r[1])) for r in rows)
-        self._count_drops(dropped, "age")
-        return 0
+        self._count_drops(sum(_sample_count(bytes(r[1])) for r in lost), "age")
 
     def _count_drops(self, samples: int, reason: str) -> None:
+        """Count dropped samples; one WARNING when an episode of drops starts (it ends when the spool drains)."""
         if samples <= 0:
-            self._dropping = False
             return
         self.dropped += samples
-        if not self._dropping:
-            log.warning("spool full, dropping oldest samples reason=%s dropped_total=%d max_bytes=%d "
-                        "max_age_s=%s", reason, self.dropped, self.max_bytes, self.max_age_s)
-        self._dropping = True
+        if self._episode_dropped is None:
+            self._episode_dropped = 0
+            log.warning("spool full, dropping the oldest samples until it drains reason=%s dropped_total=%d "
+                        "max_bytes=%d max_age_s=%s path=%s", reason, self.dropped, self.max_bytes,
+                        self.max_age_s, self.path)
+        self._episode_dropped += samples
+
+    def _end_episode(self) -> None:
+        if self._episode_dropped is not None:
+            log.warning("spool drained, the drop episode is over dropped_in_episode=%d dropped_total=%d",
+                        self._episode_dropped, self.dropped)
+            self._episode_dropped = None
+
+
+_ROOM_ATTEMPTS = 8  # rounds of dropping before a row that still does not fit is dropped itself
+_ROOM_ROWS = 16  # oldest rows dropped per round
 
 
 def _sample_count(body: bytes) -> int:
@@ -245,6 +389,44 @@ def _sample_count(body: bytes) -> int:
     return len(rows) if isinstance(rows, list) else 1
 
 
-def open_spool(state_dir: Path, max_bytes: int, max_age_s: float) -> DiskSpool:
-    """The daemon's spool: `spool.sqlite` in the state directory."""
-    return DiskSpool(Path(state_dir) / FILE_NAME, max_bytes=max_bytes, max_age_s=max_age_s)
+class UnopenedSpool:
+    """Stands in when the spool file cannot be opened (a disk with no byte left at start): what cannot be
+    published is counted as dropped, so the daemon runs and publishes live data; a restart retries."""
+
+    def __init__(self, path: Path, error: Exception) -> None:
+        self.path = path
+        self.error = error
+        self.dropped = 0
+        self.held = 0
+        self.depth = 0
+
+    def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None:
+        self.held += len(samples)
+        self.dropped += len(samples)
+
+    def pending(self, fmt: Format | None = None) -> int:
+        return 0
+
+    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
+        return []
+
+    def ack(self, ids: Sequence[int]) -> None:
+        return None
+
+    def flush(self) -> None:
+        return None
+
+    def close(self) -> None:
+        return None
+
+
+def open_spool(state_dir: Path, max_bytes: int, max_age_s: float) -> DiskSpool | UnopenedSpool:
+    """The daemon's spool: `spool.sqlite` in the state directory (or, if it cannot be opened, one that
+    counts what it cannot keep -- logged as an ERROR naming the file and the cause)."""
+    path = Path(state_dir) / FILE_NAME
+    try:
+        return DiskSpool(path, max_bytes=max_bytes, max_age_s=max_age_s)
+    except (sqlite3.Error, OSError) as exc:
+        log.error("spool cannot be opened, samples that cannot be published are dropped (counted) until a "
+                  "restart path=%s error=%s", path, exc)
+        return UnopenedSpool(path, exc)

@@ -66,10 +66,12 @@ class Arrival:
     key: Key
     historical: bool
     received_s: float
+    birth: bool = False  # a DBIRTH metric: the value as the host's current state (a historian stores it)
 
 
 def sparkplug_arrivals(messages: Sequence[Received], group: str, node: str) -> list[Arrival]:
-    """Every DDATA metric as (device, name, ts) using the aliases of the DBIRTHs seen."""
+    """Every DDATA metric, and every DBIRTH metric with a value, as (device, name, ts) using the aliases of
+    the DBIRTHs seen. A value a birth carried has reached the host: its replay would be a duplicate."""
     aliases: dict[str, dict[int, str]] = defaultdict(dict)
     out: list[Arrival] = []
     for m in messages:
@@ -80,6 +82,10 @@ def sparkplug_arrivals(messages: Sequence[Received], group: str, node: str) -> l
         if parts[2] == "DBIRTH":
             for metric in m.spb().metrics:
                 aliases[device][metric.alias] = metric.name
+                if not metric.is_null:
+                    value = metric.string_value if metric.WhichOneof("value") == "string_value" else None
+                    out.append(Arrival(key_of(device, metric.name, metric.timestamp, value), metric.is_historical,
+                                       0.0, birth=True))
         elif parts[2] == "DDATA":
             for metric in m.spb().metrics:
                 name = aliases[device][metric.alias]
@@ -136,14 +142,14 @@ def compare(collected: Collected, arrivals: Sequence[Arrival], down_phases: tupl
     out_of_order: list[str] = []
     as_historical: set[Key] = set()
     for a in arrivals:
-        if a.historical:
+        if a.historical or a.birth:  # held, then carried by a birth: the host has it, with its timestamp
             as_historical.add(a.key)
         if a.key in seen:
             duplicates += 1
             continue
         seen[a.key] = a
         stream = (a.key[0], a.key[1], a.historical)
-        if a.key[1] not in EVENT_NAMES:
+        if a.key[1] not in EVENT_NAMES and not a.birth:
             ts = a.key[2]
             if stream in last and ts < last[stream]:
                 out_of_order.append(f"{stream}: {ts} after {last[stream]}")

@@ -112,6 +112,16 @@ async def test_healthz_and_metrics_follow_the_live_state(mosquitto: Mosquitto, t
             await async_wait_for(lambda: not daemon.publisher.connected, 10, message="broker loss seen")
             status, _, body = await http_get(http_port, "/healthz")
             assert status == 503 and "broker" in json.loads(body)["reasons"][0]
+            # Rows wait in the spool: the depth says how many, as a gauge (it goes down on replay).
+            await async_wait_for(lambda: daemon.spool.pending() > 3, 10, message="rows spooled")
+            text = (await http_get(http_port, "/metrics"))[2].decode()
+            families = {f.name: f for f in text_string_to_metric_families(text)}
+            assert families["focas_edge_spool_depth"].type == "gauge"
+            depth = samples(text)[("focas_edge_spool_depth", ())]
+            assert 3 < depth <= daemon.spool.pending(), depth
+            events = families["focas_edge_publisher_events"]
+            assert not [s for s in events.samples if s.labels["event"] in ("spool_rows", "unconfirmed_batches")]
+            assert families["focas_edge_unconfirmed_batches"].type == "gauge"
 
             assert (await http_get(http_port, "/nope"))[0] == 404
             assert (await http_get(http_port, "/healthz", "POST"))[0] == 405

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import signal
 import sqlite3
@@ -24,8 +25,12 @@ import pytest
 
 from edge.config import parse_config
 from edge.daemon import Daemon
+from edge.publish import payload as pl
 from edge.publish.forwarding import ForwardingPolicy
+from edge.publish.json_topics import GATEWAY, OFFLINE
+from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
+from edge.samples import MetricType, Sample
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.delivery import (
@@ -38,6 +43,7 @@ from tests.integration.delivery import (
 )
 from tests.integration.mqtt_observer import Observer
 from tests.integration.tcp_relay import TcpRelay
+from tests.small_disk import fill, small_disk
 
 pytestmark = pytest.mark.integration
 
@@ -114,6 +120,19 @@ async def all_born(observer: Observer, count: int = 1) -> None:
         await observer.wait_topic(f"spBv1.0/plant/DBIRTH/gw/m{i + 1}", count=count, timeout=20)
 
 
+async def broker_back(mosquitto: Mosquitto, relay: TcpRelay, observer: Observer, collected: Collected,
+                      daemon: Daemon) -> tuple[int, float]:
+    """Restart the broker, let the daemon in once the test's subscriber is back: (rows waiting, when)."""
+    mosquitto.start()
+    await observer.wait_resubscribed()
+    collected.phase = "replay"
+    waiting = daemon.spool.pending()
+    reopened = time.monotonic()
+    relay.accepting = True
+    await all_born(observer, count=2)
+    return waiting, reopened
+
+
 async def wait_delivered(observer: Observer, collected: Collected) -> None:
     """Wait until every collected sample arrived in both formats (or fail with what is missing)."""
 
@@ -154,13 +173,7 @@ async def test_broker_outage_every_delta_arrives_once_in_order_historical_flagge
         mosquitto.stop(kill=True)
         await async_wait_for(lambda: daemon.spool.pending() > 0, timeout=10, message="spooling")
         await asyncio.sleep(max(0.0, OUTAGE_S - (time.monotonic() - killed)))  # the outage itself
-        mosquitto.start()
-        await observer.wait_resubscribed()
-        collected.phase = "replay"
-        spooled = daemon.spool.pending()
-        reopened = time.monotonic()
-        relay.accepting = True
-        await all_born(observer, count=2)
+        spooled, reopened = await broker_back(mosquitto, relay, observer, collected, daemon)
         born = time.monotonic()
         await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=60, message="spool replayed")
         replayed = time.monotonic()
@@ -326,3 +339,132 @@ async def test_kill_9_during_buffering_and_during_replay_loses_nothing_and_state
     assert bdseqs == sorted(bdseqs) or 0 in bdseqs
     for d, aliases in aliases_before.items():
         assert birth_aliases(observer, d) == aliases
+
+
+async def test_replay_repeats_nothing_a_birth_or_live_data_already_carried(
+        mosquitto: Mosquitto, observer: Observer, fleet: Fleet, tmp_path: Path) -> None:
+    """Issue 16.10: after a rebirth and a primary-host offline/online, no historical DDATA repeats a value
+    (device, metric, CNC timestamp, value) the host already got live or in a DBIRTH."""
+    text = config_text(mosquitto.host, mosquitto.port, tmp_path, fleet, ", primary_host_id: scada")
+    state = "spBv1.0/STATE/scada"
+    rebirth = Payload(metrics=[Payload.Metric(name=pl.REBIRTH_METRIC, boolean_value=True)]).SerializeToString()
+    t0 = int(time.time() * 1000)
+    await observer.publish(state, json.dumps({"online": True, "timestamp": t0}).encode(), retain=True)
+    daemon, task, collected = await start(text)
+    daemon.publisher.settings.rebirth_min_interval_s = 1.0  # the second request waits: data is held
+    try:
+        await all_born(observer)
+        await observer.wait_count("DDATA", 20, timeout=15)
+        for count in (2, 3):  # two rebirths, the second held back by the minimum interval
+            await observer.publish("spBv1.0/plant/NCMD/gw", rebirth)
+            await observer.wait_topic("spBv1.0/plant/NBIRTH/gw", count=count, timeout=15)
+        await async_wait_for(lambda: daemon.publisher.counters["replayed_rows"] > 0, timeout=15,
+                             message="rows held by the rebirth replayed")
+        await observer.publish(state, json.dumps({"online": False, "timestamp": t0 + 1}).encode(), retain=True)
+        await async_wait_for(lambda: daemon.publisher.session_state != "born", timeout=10, message="NDEATH")
+        await async_wait_for(lambda: daemon.spool.pending("sparkplug") > 10, timeout=15,
+                             message="spooling while the host is offline")
+        await observer.publish(state, json.dumps({"online": True, "timestamp": t0 + 2}).encode(), retain=True)
+        await observer.wait_topic("spBv1.0/plant/NBIRTH/gw", count=4, timeout=15)
+        await async_wait_for(lambda: daemon.spool.pending("sparkplug") == 0, timeout=60, message="replayed")
+    finally:
+        await stop(daemon, task)
+        await observer.publish(state, b"", retain=True)
+    await wait_delivered(observer, collected)
+    arrivals = sparkplug_arrivals(observer.snapshot(), "plant", "gw")
+    verdict = compare(collected, arrivals)
+    assert not verdict.problems(), verdict.problems()
+    assert verdict.historical > 0, "nothing was replayed: the drill tested nothing"
+    seen: set[tuple[object, ...]] = set()
+    repeated = []  # historical DDATA metrics the host already had (live, in a DBIRTH or replayed before)
+    for a in arrivals:
+        if a.historical and not a.birth and a.key in seen:
+            repeated.append(a.key)
+        seen.add(a.key)
+    skipped = daemon.publisher.counters["replay_duplicates_skipped"]
+    print(f"\nFIGURES replay dedupe: historical={verdict.historical} repeated_by_replay={len(repeated)} "
+          f"skipped_at_replay={skipped}")
+    assert not repeated, f"{len(repeated)} values the host already had were replayed, e.g. {repeated[:3]}"
+
+
+async def test_full_disk_broker_outage_reconnects_at_once_bounds_the_spool_and_counts_every_drop(
+        mosquitto: Mosquitto, relay: TcpRelay, observer: Observer, fleet: Fleet, tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 16.6-8: state_dir on a 1 MB tmpfs, the broker away until the disk is full. The node is back as
+    soon as the broker is (bdSeq kept in memory), the spool drops the oldest samples and counts them all,
+    logs once, and drains what it kept after the births, deleting acknowledged rows on the full disk."""
+    caplog.set_level(logging.WARNING)
+    with small_disk(tmp_path / "state", "1m") as state:
+        daemon, task, collected = await start(config_text(relay.host, relay.port, state, fleet))
+        try:
+            await all_born(observer)
+            await observer.wait_count("DDATA", 20, timeout=15)
+            filler = fill(state)  # leave the spool a few hundred kB so the disk is full in seconds
+            filler.write_bytes(b"\0" * max(0, filler.stat().st_size - 384 * 1024))
+            collected.phase = "down"
+            relay.accepting = False
+            observer.expect_reconnect()
+            mosquitto.stop(kill=True)
+            await async_wait_for(lambda: daemon.spool.dropped > 0, timeout=60, message="the disk is full")
+            await async_wait_for(lambda: daemon.spool.dropped > 500, timeout=30, message="dropping")
+            fill(state, "filler2")  # and nothing at all is left for the bdSeq file
+            spooled_rows, reopened = await broker_back(mosquitto, relay, observer, collected, daemon)
+            reconnect_s = time.monotonic() - reopened
+            await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=60, message="spool drained")
+            drained_s = time.monotonic() - reopened
+            collected.phase = "after"
+            await async_wait_for(lambda: collected.per_device.get("m1:after", 0) > 5, timeout=10,
+                                 message="live data after the replay")
+        finally:
+            deaths = len(observer.of("NDEATH"))
+            await stop(daemon, task)
+        disk_full_at_connect = daemon.publisher.counters["bdseq_persist_failures"]
+    # Dropped samples never arrive, so wait for the last message of each connection instead of for all.
+    await observer.wait_count("NDEATH", deaths + 1, timeout=10)
+    await async_wait_for(lambda: [m for m in observer.on(f"focas/{GATEWAY}/online") if m.payload == OFFLINE],
+                         timeout=10, message="the JSON connection's last message")
+    snap = observer.snapshot()
+    missing = 0
+    figures: dict[str, object] = {}
+    for fmt, arrivals in (("sparkplug", sparkplug_arrivals(snap, "plant", "gw")),
+                          ("json", json_arrivals(snap, "focas"))):
+        verdict = compare(collected, arrivals)
+        assert not verdict.unexpected and not verdict.out_of_order, verdict.problems()
+        missing += len(verdict.missing)
+        figures[f"{fmt}_delivered_historical"] = verdict.historical
+        figures[f"{fmt}_missing"] = len(verdict.missing)
+    spool = daemon.spool
+    figures.update(polled_during_outage=sum(1 for p in collected.keys.values() if p == "down"),
+                   spooled_samples=spool.held, dropped_samples=spool.dropped, spooled_rows_at_return=spooled_rows,
+                   reconnect_s=round(reconnect_s, 2), drained_s=round(drained_s, 2),
+                   bdseq_persist_failures=disk_full_at_connect)
+    print(f"\nFIGURES full disk: {json.dumps(figures)}")
+    assert disk_full_at_connect >= 1, "the CONNECT after the outage did not meet a full disk"
+    assert spool.dropped > 0 and missing <= spool.dropped, "a sample was lost without being counted"
+    episodes = [r for r in caplog.records if "spool full, dropping" in r.getMessage()]
+    assert len(episodes) == 1, f"one log line per drop episode, got {len(episodes)}"
+    failures = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR
+                and r.name.startswith("edge.publish")]
+    assert not failures, failures[:3]
+
+
+async def test_rows_waiting_while_connected_are_drained_without_a_reconnect(
+        mosquitto: Mosquitto, observer: Observer, fleet: Fleet, tmp_path: Path) -> None:
+    """Issue 16.8: rows left in the spool while the session is up (a replay that ended early, a delete that
+    had no room) are replayed within a probe interval, not at the next reconnect."""
+    daemon, task, _ = await start(config_text(mosquitto.host, mosquitto.port, tmp_path, fleet))
+    try:
+        await all_born(observer)
+        await async_wait_for(lambda: daemon.publisher.counters["replayed_rows"] == 0 and
+                             not daemon.spool.pending(), timeout=10, message="settled")
+        connects = daemon.publisher.counters["sparkplug_connects"]
+        old = int(time.time() * 1000) - 3_600_000
+        for fmt in ("sparkplug", "json"):
+            daemon.spool.hold(fmt, "m1", "data", [Sample("Macro/500", 42.5, MetricType.DOUBLE, old)])
+        await async_wait_for(lambda: daemon.spool.pending() == 0, timeout=10, message="waiting rows drained")
+        assert daemon.publisher.counters["sparkplug_connects"] == connects, "drained by a reconnect"
+        await async_wait_for(lambda: [a for a in sparkplug_arrivals(observer.snapshot(), "plant", "gw")
+                                      if a.key == ("m1", "Macro/500", old) and a.historical],
+                             timeout=10, message="the waiting row arrived as historical")
+    finally:
+        await stop(daemon, task)

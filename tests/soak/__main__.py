@@ -73,9 +73,12 @@ class Checker:
             parts = msg.topic.split("/")
             if parts[0] == "spBv1.0" and len(parts) == 5:
                 kind, device = parts[2], parts[4]
-                if kind == "DBIRTH":
+                if kind == "DBIRTH":  # a value a birth carries has reached the host (the replay skips it)
                     for m in pl.decode(bytes(msg.payload)).metrics:
                         self._aliases[device][m.alias] = m.name
+                        if not m.is_null:
+                            value = m.string_value if m.WhichOneof("value") == "string_value" else None
+                            self.keys.add(("spb", *key_of(device, m.name, m.timestamp, value)))
                 elif kind == "DDATA":
                     for m in pl.decode(bytes(msg.payload)).metrics:
                         name = self._aliases[device].get(m.alias, f"?{m.alias}")

@@ -1,0 +1,52 @@
+"""DeliveredValues: a replayed sample is skipped only when a barrier taken after its copy proves the copy."""
+
+from __future__ import annotations
+
+from edge.publish.replay_dedupe import DeliveredValues
+from edge.samples import MetricType, Sample
+
+
+def s(ts: int, value: object = 1.5, name: str = "Macro/500") -> Sample:
+    return Sample(name, value, MetricType.DOUBLE, ts)
+
+
+def test_sent_on_this_connection_is_skipped_and_counted() -> None:
+    d = DeliveredValues()
+    d.record("m1", [s(1), s(2)])
+    assert d.fresh("m1", [s(1), s(2), s(3)]) == [s(3)]
+    assert d.fresh("m2", [s(1)]) == [s(1)], "another device's value is not the same value"
+    assert d.fresh("m1", [s(1, value=2.5)]) == [s(1, value=2.5)], "same timestamp, other value: not a repeat"
+    assert d.skipped == 2
+
+
+def test_a_new_connection_forgets_what_was_not_proven() -> None:
+    d = DeliveredValues()
+    d.record("m1", [s(1)])
+    mark = d.mark()
+    d.record("m1", [s(2)])  # sent after the barrier went out: that barrier proves nothing about it
+    d.proven(mark)
+    d.connection_lost()
+    assert d.fresh("m1", [s(1), s(2)]) == [s(2)]
+
+
+def test_forget_when_the_spool_is_empty_and_the_limit_holds() -> None:
+    d = DeliveredValues(limit=3)
+    d.record("m1", [s(1), s(2), s(3)])
+    d.record("m1", [s(4)])
+    assert len(d) == 3
+    d.forget()
+    assert len(d) == 0 and d.fresh("m1", [s(1)]) == [s(1)]
+
+
+def test_values_compare_as_the_spool_stores_them() -> None:
+    d = DeliveredValues()
+    d.record("m1", [Sample("Alarm/Event", {"b": 1, "a": [2]}, MetricType.STRING, 5)])
+    assert d.fresh("m1", [Sample("Alarm/Event", {"a": [2], "b": 1}, MetricType.STRING, 5)]) == []
+
+
+def test_an_acknowledged_rows_samples_are_forgotten() -> None:
+    d = DeliveredValues()
+    d.record("m1", [s(1), s(2)])
+    d.proven(d.mark())
+    d.discard("m1", [s(1)])
+    assert len(d) == 1 and d.fresh("m1", [s(1), s(2)]) == [s(1)]
