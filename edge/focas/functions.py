@@ -341,18 +341,21 @@ def _count_encode(value: int, req: RequestSubpacket, ctx: Context) -> bytes:
     return struct.pack(">h", value)
 
 
-def _records_codecs(form: SlotForm) -> tuple[PayloadDecoder, PayloadEncoder]:
+def _records_codecs(form: SlotForm, whole_slots: bool) -> tuple[PayloadDecoder, PayloadEncoder]:
     def decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> Any:
-        return decode_records(payload, ctx.max_axis, form)
+        return decode_records(payload, ctx.max_axis, form, whole_slots=whole_slots)
 
     def encode(value: Any, req: RequestSubpacket, ctx: Context) -> bytes:
-        return encode_records(value, ctx.max_axis, form)
+        return encode_records(value, ctx.max_axis, form, whole_slots=whole_slots)
 
     return decode, encode
 
 
-_REC4_DECODE, _REC4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE)
-_REC8_DECODE, _REC8_ENCODE = _records_codecs(SlotForm.SCALED)
+_REC4_DECODE, _REC4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE, whole_slots=False)
+_REC8_DECODE, _REC8_ENCODE = _records_codecs(SlotForm.SCALED, whole_slots=False)
+# Diagnosis records are sized by their slot, never by their type code (see model.DIAG_TYPE_CODES).
+_DIAG4_DECODE, _DIAG4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE, whole_slots=True)
+_DIAG8_DECODE, _DIAG8_ENCODE = _records_codecs(SlotForm.SCALED, whole_slots=True)
 
 
 def _pmc_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[int | float]:
@@ -513,11 +516,11 @@ READ_PARAMS_8 = Function("read_params", CLASS_CNC, 0x8D, Evidence.CAPTURE, ("fir
                          "records: i32 number, i16 axis, i16 type, max_axis x 8-B scaled",
                          _REC8_DECODE, _REC8_ENCODE)
 READ_DIAG_4 = Function("read_diag", CLASS_CNC, 0x30, Evidence.CAPTURE, ("first", "last", "axis"),
-                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type, max_axis x 4-B slots",
-                       _REC4_DECODE, _REC4_ENCODE)
+                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type (diagnosis codes: "
+                       "2 = 2-word), max_axis x 4-B slots, each an i32", _DIAG4_DECODE, _DIAG4_ENCODE)
 READ_DIAG_8 = Function("read_diag", CLASS_CNC, 0x93, Evidence.CAPTURE, ("first", "last", "axis"),
-                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type, max_axis x 8-B scaled",
-                       _REC8_DECODE, _REC8_ENCODE)
+                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type (diagnosis codes: "
+                       "0 = byte), max_axis x 8-B scaled", _DIAG8_DECODE, _DIAG8_ENCODE)
 READ_MACROS = Function("read_macros", CLASS_CNC, 0x15, Evidence.DOC, ("first", "last"), "list[float | None]",
                        "(last - first + 1) x 8-B scaled", _macros_decode, _scaled_list_encode)
 WRITE_MACROS = Function("write_macros", CLASS_CNC, 0x16, Evidence.CODE, ("first", "last"),

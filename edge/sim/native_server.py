@@ -29,7 +29,7 @@ import logging
 import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from edge.focas import functions as fn
@@ -60,7 +60,7 @@ from edge.focas.frame import (
     request_chunks,
 )
 from edge.focas.functions import Context, Function, error_response
-from edge.focas.model import ParamRecord, PmcType
+from edge.focas.model import DIAG_TYPE_CODES, ParamRecord, ParamType, PmcType
 from edge.focas.values import RECORD_HEAD_LAYOUT, encode_scaled
 from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.profiles import Profile
@@ -153,7 +153,9 @@ def _params(state: MachineState, req: RequestSubpacket, ctx: Context) -> list[An
 
 
 def _diag(state: MachineState, req: RequestSubpacket, ctx: Context) -> list[Any]:
-    return state.read_diag(req.args[0], req.args[1], req.args[2])
+    """Diagnosis records carry the diagnosis type codes a real control sends, not the parameter ones."""
+    return [replace(record, type=DIAG_TYPE_CODES[ParamType(record.type)])
+            for record in state.read_diag(req.args[0], req.args[1], req.args[2])]
 
 
 def _clock(state: MachineState, req: RequestSubpacket, ctx: Context) -> Any:
@@ -294,7 +296,7 @@ def _direct_encoder(function: Function, ctx: Context) -> Callable[[Any], bytes] 
         return _scaled_list_bytes
     if encoder is fn.ACTUAL_FEED.encode_payload:  # one 8-B scaled value: feed, spindle speed
         return scaled_bytes
-    if encoder is fn.READ_PARAMS_8.encode_payload:  # 30i-form parameter and diagnosis records
+    if encoder in (fn.READ_PARAMS_8.encode_payload, fn.READ_DIAG_8.encode_payload):  # 30i-form records
         max_axis = ctx.max_axis
         return lambda records: _scaled_records_bytes(records, max_axis)
     return None
