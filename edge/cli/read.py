@@ -12,7 +12,7 @@ import asyncio
 import json
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass
 from datetime import datetime
 from typing import Any, TypeVar
 
@@ -93,18 +93,23 @@ Shaper = Callable[[list[Any]], object]
 
 @dataclass(frozen=True, slots=True)
 class ReadPlan:
-    """The read items one CLI item needs and how their results become the printed value."""
+    """The read items one CLI item needs and how their results become the printed value.
+
+    `parts` names items that may fail alone (a composite such as positions degrades per kind): the shaper
+    gets None for a failed part, and the item fails only when every part failed."""
 
     text: str
     items: tuple[it.ReadItem, ...]
     shape: Shaper
+    parts: dict[int, str] = field(default_factory=dict)
 
 
 def plan_read(text: str) -> ReadPlan:
     """Raises TargetError for a string that is not a readable target."""
     target = parse_target(text)
     items, shape = _reads_for(target)
-    return ReadPlan(text, tuple(items), shape)
+    parts = _PARTS.get(target.name, {}) if isinstance(target, NamedTarget) else {}
+    return ReadPlan(text, tuple(items), shape, parts)
 
 
 def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
@@ -151,6 +156,8 @@ def _positions(results: list[Any]) -> object:
     names, *kinds = results
     table: dict[str, dict[str, object]] = {}
     for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
+        if values is None:  # this kind failed alone (see ReadPlan.parts)
+            continue
         for name, value in zip(names, values, strict=False):
             table.setdefault(str(name), {})[kind] = value
     return table
@@ -168,11 +175,35 @@ _NAMED: dict[str, tuple[list[it.ReadItem], Shaper]] = {
 }
 
 
+# Composite items whose parts may fail alone: item index -> part name.
+_PARTS: dict[str, dict[int, str]] = {
+    "positions": {index + 1: kind for index, kind in enumerate(it.POSITION_KINDS)},
+}
+
+
 @dataclass(frozen=True, slots=True)
 class ItemOutcome:
     item: str
     value: object = None
     error: BaseException | None = None
+    part_errors: tuple[tuple[str, BaseException], ...] = ()
+
+
+def _outcome(plan: ReadPlan, results: list[Any]) -> ItemOutcome:
+    """One CLI item from its results: failed parts are left out; any other failure fails the item."""
+    failed_parts = tuple((plan.parts[i], r) for i, r in enumerate(results)
+                         if i in plan.parts and isinstance(r, BaseException))
+    required = [r for i, r in enumerate(results) if i not in plan.parts]
+    failed = next((r for r in required if isinstance(r, BaseException)), None)
+    if failed is None and plan.parts and len(failed_parts) == len(plan.parts):
+        failed = failed_parts[0][1]
+    if failed is not None:
+        return ItemOutcome(plan.text, error=failed)
+    shaped = [None if i in plan.parts and isinstance(r, BaseException) else r for i, r in enumerate(results)]
+    try:
+        return ItemOutcome(plan.text, plan.shape(shaped), part_errors=failed_parts)
+    except (IndexError, TypeError, ValueError, AttributeError) as exc:
+        return ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}"))
 
 
 async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
@@ -188,14 +219,7 @@ async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]
     for plan in plans:
         mine = results[position : position + len(plan.items)]
         position += len(plan.items)
-        failed = next((r for r in mine if isinstance(r, BaseException)), None)
-        if failed is not None:
-            outcomes.append(ItemOutcome(plan.text, error=failed))
-            continue
-        try:
-            outcomes.append(ItemOutcome(plan.text, plan.shape(mine)))
-        except (IndexError, TypeError, ValueError, AttributeError) as exc:
-            outcomes.append(ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}")))
+        outcomes.append(_outcome(plan, mine))
     return outcomes
 
 
@@ -272,6 +296,9 @@ def run(args: argparse.Namespace) -> int:
     plans, session = prepared
     outcomes = asyncio.run(read_all(session, plans))
     (print_json if args.json else print_table)(outcomes)
+    for outcome in outcomes:
+        for part, error in outcome.part_errors:
+            print(f"focas-edge read: {outcome.item}: {part}: {describe_error(error)} (left out)", file=sys.stderr)
     failed = [o for o in outcomes if o.error is not None]
     for outcome in failed:
         assert outcome.error is not None

@@ -156,9 +156,10 @@ class MachinePlan:
         wanted = set(groups)
         return [read for read in self.reads if read.group in wanted]
 
-    def without(self, operation: str) -> MachinePlan:
-        """The plan minus every read of one operation (a function this control answers EW_FUNC to)."""
-        return MachinePlan(tuple(r for r in self.reads if r.item.operation != operation), self.periods)
+    def without(self, key: str) -> MachinePlan:
+        """The plan minus the reads of one drop key or operation (a function this control refuses)."""
+        return MachinePlan(tuple(r for r in self.reads if key not in (r.item.operation, drop_key(r.item))),
+                           self.periods)
 
     def metrics(self) -> list[MetricSpec]:
         """Every metric this machine can publish (for its DBIRTH), names unique."""
@@ -176,6 +177,17 @@ class MachinePlan:
         for read in self.reads:
             bands.update(read.deadband_map())
         return bands
+
+
+def drop_key(item: it.ReadItem) -> str:
+    """What a refused read is dropped by: its operation, or for one part of a family answered per part
+    (a position kind, a timer kind) operation:part, so a control refusing one kind keeps the others."""
+    match item:
+        case it.ReadPositions(kind=kind):
+            return f"{item.operation}:{kind}"
+        case it.ReadTimer(kind=kind):
+            return f"{item.operation}:{kind}"
+    return item.operation
 
 
 def _static_reads() -> list[PlannedRead]:

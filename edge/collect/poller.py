@@ -452,7 +452,7 @@ class MachinePoller:
                      samples: list[Sample]) -> None:
         self.stats.count_error(error)
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
-            operation = read.item.operation
+            operation = pl.drop_key(read.item)
             if operation not in self._dropped:
                 self._dropped.add(operation)
                 self._plan = self._plan.without(operation)

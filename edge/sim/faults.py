@@ -17,7 +17,9 @@ hang               sends half of the next N answers, then         FocasTimeout
 garbage            answers the next N requests with bytes that    ProtocolError
                    are no FOCAS frame
 ew                 command code or function name -> EW code       that CncError subclass
-                   answered for it instead of data
+                   answered for it instead of data; "name/arg1"
+                   narrows it to one first argument (positions/7:
+                   one position kind, as a real EDM answers)
 max_sessions       connections beyond this many are reset         ConnectionLost
 =================  =============================================  ===========================
 """
@@ -128,11 +130,14 @@ class FaultPlan:
             self.drop_after = None
             return True
 
-    def ew_for(self, command: int, name: str) -> int | None:
-        """The EW code forced for this command (by code or by table name), if any."""
+    def ew_for(self, command: int, name: str, arg1: int | None = None) -> int | None:
+        """The EW code forced for this command (by code, by table name, or by name/arg1), if any."""
         with self._lock:
-            code = self.ew.get(command)
-            return code if code is not None else self.ew.get(name)
+            for key in (command, name, f"{name}/{arg1}"):
+                code = self.ew.get(key)
+                if code is not None:
+                    return code
+            return None
 
 
 def _ew_key(key: str | int) -> str | int:

@@ -96,6 +96,23 @@ def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[st
     assert rows["clock"]["value"][:4].isdigit()
 
 
+def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """One position kind answered EW_NOOPT (as a real EDM answers distance-to-go): the other kinds are
+    printed, the refused one is named on stderr, the item does not fail."""
+    sim.native.faults.update({"ew": {"positions/7": 6}})
+    try:
+        code, out, err = run_cli(capsys, "read", "--json", sim.address, "positions")
+    finally:
+        sim.native.faults.clear()
+    assert code == 0, err
+    row = json_lines(out)["positions"]
+    assert row["error"] is None
+    axes = row["value"]
+    assert set(axes) == set(sim.state.axis_names())
+    assert all(set(kinds) == {"absolute", "machine", "relative"} for kinds in axes.values())
+    assert "positions: distance" in err and "EW_NOOPT" in err
+
+
 def test_read_table_is_readable(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(capsys, "read", sim.address, "macro:500-501", "status")
     assert code == 0
