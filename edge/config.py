@@ -40,6 +40,7 @@ from edge import ConfigError
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.targets import (
+    ALL_AXES,
     MAX_AXIS,
     MAX_MACRO,
     MAX_PARAM,
@@ -438,17 +439,24 @@ class PmcRange(_Model):
 
 
 class NumberedItem(_Model):
-    """One parameter or diagnosis number for one axis (0 = the whole CNC)."""
+    """One parameter or diagnosis number for one axis (0 = the whole CNC; `all` = every axis in one
+    read, published per axis name)."""
 
     number: int = Field(ge=0, le=MAX_PARAM)
-    axis: int = Field(default=0, ge=0, le=MAX_AXIS)
+    axis: int = Field(default=0, ge=ALL_AXES, le=MAX_AXIS)
     name: MetricName | None = None
     deadband: float = Field(default=0.0, ge=0)
 
     @model_validator(mode="before")
     @classmethod
     def _shorthand(cls, value: object) -> object:
-        return {"number": value} if isinstance(value, int) and not isinstance(value, bool) else value
+        if isinstance(value, int) and not isinstance(value, bool):
+            return {"number": value}
+        if isinstance(value, dict) and isinstance(value.get("axis"), str):
+            if value["axis"].strip().lower() != "all":
+                raise ValueError(f"axis must be 0..{MAX_AXIS} or 'all', got {value['axis']!r}")
+            return {**value, "axis": ALL_AXES}
+        return value
 
     @model_validator(mode="after")
     def _folder(self) -> NumberedItem:
@@ -459,7 +467,7 @@ class NumberedItem(_Model):
     def metric_name(self, folder: str) -> str:
         if self.name is not None:
             return self.name
-        return f"{folder}/{self.number}" + (f"/{self.axis}" if self.axis else "")
+        return f"{folder}/{self.number}" + (f"/{self.axis}" if self.axis > 0 else "")
 
 
 class PollPlan(_Model):

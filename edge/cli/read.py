@@ -12,16 +12,18 @@ import asyncio
 import json
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass, replace
 from datetime import datetime
 from typing import Any, TypeVar
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.collect.axis_numbers import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
 from edge.focas.model import ParamRecord
 from edge.targets import (
+    ALL_AXES,
     DiagTarget,
     MacroTarget,
     NamedTarget,
@@ -102,6 +104,7 @@ class ReadPlan:
     items: tuple[it.ReadItem, ...]
     shape: Shaper
     parts: dict[int, str] = field(default_factory=dict)
+    per_axis: ReadPlan | None = None  # an axis-0 number refused as axis-type is read this way instead
 
 
 def plan_read(text: str) -> ReadPlan:
@@ -109,7 +112,11 @@ def plan_read(text: str) -> ReadPlan:
     target = parse_target(text)
     items, shape = _reads_for(target)
     parts = _PARTS.get(target.name, {}) if isinstance(target, NamedTarget) else {}
-    return ReadPlan(text, tuple(items), shape, parts)
+    per_axis = None
+    if isinstance(target, ParamTarget | DiagTarget) and target.axis == 0:
+        per_axis_items, per_axis_shape = _reads_for(replace(target, axis=ALL_AXES))
+        per_axis = ReadPlan(text, tuple(per_axis_items), per_axis_shape)
+    return ReadPlan(text, tuple(items), shape, parts, per_axis)
 
 
 def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
@@ -126,10 +133,13 @@ def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
         addresses = range(target.start, target.end + 1, target.data_type.width)
         return [item], lambda r: _by_number(addresses, r[0], target.area)
     if isinstance(target, ParamTarget):
-        read = it.ReadParams(target.first, target.last, target.axis)
-        return [read], lambda r: _records(r[0], target.bit)
-    assert isinstance(target, DiagTarget)
-    return [it.ReadDiag(target.first, target.last, target.axis)], lambda r: _records(r[0], None)
+        read: it.ReadParams | it.ReadDiag = it.ReadParams(target.first, target.last, target.axis)
+        param_bit = target.bit
+    else:
+        read, param_bit = it.ReadDiag(target.first, target.last, target.axis), None
+    if target.axis == ALL_AXES:  # one value per controlled axis, by axis name
+        return [read, it.ReadAxisNames()], lambda r: _records(r[0], param_bit, r[1])
+    return [read], lambda r: _records(r[0], param_bit)
 
 
 def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) -> object:
@@ -138,12 +148,14 @@ def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) ->
     return {f"{prefix}{n}": v for n, v in zip(numbers, values, strict=False)}
 
 
-def _records(records: Sequence[ParamRecord], bit: int | None) -> object:
+def _records(records: Sequence[ParamRecord], bit: int | None, axis_names: Sequence[str] = ()) -> object:
     def pick(value: object) -> object:
         return (value >> bit) & 1 if bit is not None and isinstance(value, int) else value
 
     def one(record: ParamRecord) -> object:
-        if len(record.values) > 1 and record.axis == -1:  # a per-axis parameter read for every axis
+        if record.axis == ALL_AXES and axis_names:  # the controlled axes' slots, by name
+            return {name: pick(v) for name, v in zip(axis_names, record.values, strict=False)}
+        if len(record.values) > 1 and record.axis == ALL_AXES:  # a per-axis parameter read for every axis
             return [pick(v) for v in record.values]
         return pick(record.value)
 
@@ -208,12 +220,22 @@ def _outcome(plan: ReadPlan, results: list[Any]) -> ItemOutcome:
 
 async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
     """Connect, read every plan's items in ONE batch, shape the results per CLI item."""
-    flat = [item for plan in plans for item in plan.items]
     try:
         async with session as cnc:
-            results = await cnc.batch(flat)
+            outcomes = await _read_batch(cnc, plans)
+            retry = [(i, plan.per_axis) for i, (plan, outcome) in enumerate(zip(plans, outcomes, strict=True))
+                     if plan.per_axis is not None and refused_as_axis_type(outcome.error)]
+            if retry:  # axis-type numbers asked with axis 0: read them for every axis
+                again = await _read_batch(cnc, [p for _, p in retry if p is not None])
+                for (index, _), outcome in zip(retry, again, strict=True):
+                    outcomes[index] = outcome
     except FocasError as exc:
         return [ItemOutcome(plan.text, error=exc) for plan in plans]
+    return outcomes
+
+
+async def _read_batch(cnc: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
+    results = await cnc.batch([item for plan in plans for item in plan.items])
     outcomes = []
     position = 0
     for plan in plans:
@@ -267,7 +289,8 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "read", help="read items from one CNC",
         description="Read items from one CNC in one batched request. Items: sysinfo status alarms program "
-                    "positions clock macro:500-505 param:6711 param:1815/1 param:1815/0.3 diag:980-981/1 "
+                    "positions clock macro:500-505 param:6711 param:1815/1 param:1815/0.3 param:1850/all "
+                    "diag:980-981/1 diag:308-309/all "
                     "pmc:D2204.word pmc:R100-R103 pmc:R100.3",
         epilog="Exit codes: 0 every item read, 1 an item or the connection failed, 2 bad usage.")
     add_connection_arguments(parser)

@@ -24,6 +24,7 @@ from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
 from edge.samples import MetricSpec, MetricType
 
 PART_COUNT_PARAM = 6711
+ALL_AXES = -1  # the FOCAS axis argument reading every axis at once
 
 
 class Group(enum.Enum):
@@ -109,6 +110,8 @@ class StaticInfo:
     sysinfo: SysInfo | None = None
     axis_names: tuple[str, ...] = ()
     spindle_names: tuple[str, ...] = ()
+    # Configured axis-0 numbers the control answered as axis-type ("Param", 1850): read for every axis.
+    per_axis: frozenset[tuple[str, int]] = frozenset()
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,7 +144,7 @@ class MachinePlan:
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
         reads += _macro_reads(machine)
         reads += _pmc_reads(machine)
-        reads += _numbered_reads(machine)
+        reads += _numbered_reads(machine, static)
         if alarms.mode == "ActivePlusHistory":
             reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(alarms.history_depth),
                                      (ALARM_HISTORY,)))
@@ -249,16 +252,23 @@ def _pmc_reads(machine: MachineConfig) -> list[PlannedRead]:
     return reads
 
 
-def _numbered_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _numbered_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+    """Parameters and diagnoses; an all-axes one (`axis: all`, or an axis-0 number the control answered
+    as axis-type) is one read publishing `<name>/<axis name>` per controlled axis."""
     reads = []
-    for param in machine.poll.params:
-        spec = MetricSpec(param.metric_name("Param"), MetricType.DOUBLE, writable=True)
-        reads.append(PlannedRead(Group.PARAMS, it.ReadParams(param.number, param.number, param.axis), (spec,),
-                                 (param.deadband,)))
-    for diag in machine.poll.diags:
-        spec = MetricSpec(diag.metric_name("Diag"), MetricType.DOUBLE)
-        reads.append(PlannedRead(Group.DIAGS, it.ReadDiag(diag.number, diag.number, diag.axis), (spec,),
-                                 (diag.deadband,)))
+    kinds = (("Param", Group.PARAMS, it.ReadParams, machine.poll.params, True),
+             ("Diag", Group.DIAGS, it.ReadDiag, machine.poll.diags, False))
+    for folder, group, make, entries, writable in kinds:
+        for entry in entries:
+            name = entry.metric_name(folder)
+            axis = entry.axis
+            if axis == 0 and (folder, entry.number) in static.per_axis:
+                axis = ALL_AXES
+            per_axis = axis == ALL_AXES
+            names = [f"{name}/{axis_name}" for axis_name in static.axis_names] if per_axis else [name]
+            specs = tuple(MetricSpec(n, MetricType.DOUBLE, writable=writable) for n in names)
+            reads.append(PlannedRead(group, make(entry.number, entry.number, axis), specs,
+                                     (entry.deadband,) * len(specs)))
     return reads
 
 
@@ -318,6 +328,8 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return _alarm_values
         case it.ReadAxisNames() | it.ReadSpindleNames():
             return lambda result: [",".join(str(name) for name in result)]
+        case it.ReadParams(axis=-1) | it.ReadDiag(axis=-1):  # one number, one value per axis slot
+            return lambda result: list(result[0].values)
         case it.ReadParams() | it.ReadDiag():
             return lambda result: [record.value for record in result]
         case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions():

@@ -31,6 +31,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
+from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
 from edge.collect.tickgrid import TickGrid
@@ -311,8 +312,9 @@ class MachinePoller:
         for result in results:
             if isinstance(result, FocasError):
                 log.info("static read failed machine=%s error=%s", self.machine_id, result)
+        per_axis = await per_axis_numbers(self.session, self.machine)
         return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
-                             tuple(str(s) for s in spindles))
+                             tuple(str(s) for s in spindles), per_axis)
 
     def _static_samples(self, plan: pl.MachinePlan, samples: Sequence[Sample]) -> list[Sample]:
         """Values of the once-per-session metrics (sysinfo), stamped like the first tick."""

@@ -19,7 +19,9 @@ garbage            answers the next N requests with bytes that    ProtocolError
 ew                 command code or function name -> EW code       that CncError subclass
                    answered for it instead of data; "name/arg1"
                    narrows it to one first argument (positions/7:
-                   one position kind, as a real EDM answers)
+                   one position kind, as a real EDM answers),
+                   "name/arg1/arg3" further to one third
+                   (read_params/1850/0: the axis-0 read only)
 max_sessions       connections beyond this many are reset         ConnectionLost
 =================  =============================================  ===========================
 """
@@ -130,10 +132,10 @@ class FaultPlan:
             self.drop_after = None
             return True
 
-    def ew_for(self, command: int, name: str, arg1: int | None = None) -> int | None:
-        """The EW code forced for this command (by code, by table name, or by name/arg1), if any."""
+    def ew_for(self, command: int, name: str, args: tuple[int, ...] = (0, 0, 0)) -> int | None:
+        """The EW code forced for this command (by code, table name, name/arg1 or name/arg1/arg3), if any."""
         with self._lock:
-            for key in (command, name, f"{name}/{arg1}"):
+            for key in (command, name, f"{name}/{args[0]}", f"{name}/{args[0]}/{args[2]}"):
                 code = self.ew.get(key)
                 if code is not None:
                     return code

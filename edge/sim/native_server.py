@@ -220,7 +220,7 @@ def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPl
     ctx = ctx or Context.from_sysinfo(state.sysinfo())
     function = fn.BY_COMMAND.get((req.cls, req.command))
     name = _function_name(req)
-    forced = faults.ew_for(req.command, name, req.args[0]) if faults else None
+    forced = faults.ew_for(req.command, name, req.args) if faults else None
     if forced is not None:
         return error_response(req, forced)
     if req.path != 1:

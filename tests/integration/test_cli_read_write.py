@@ -113,6 +113,29 @@ def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]
     assert "positions: distance" in err and "EW_NOOPT" in err
 
 
+def test_all_axes_reads_are_keyed_by_axis_name(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, "param:1850/all", "diag:308-309/all")
+    assert code == 0, err
+    rows = json_lines(out)
+    names = sim.state.axis_names()
+    assert rows["param:1850/all"]["value"] == {n: sim.state.read_param_value(1850, i + 1)
+                                               for i, n in enumerate(names)}
+    diags = rows["diag:308-309/all"]["value"]
+    assert set(diags) == {"308", "309"} and all(list(v) == names for v in diags.values())
+
+
+def test_axis_type_number_refused_at_axis_0_is_read_per_axis(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """A control answering EW_ATTRIB for an axis-type number read with axis 0: read it for every axis."""
+    sim.native.faults.update({"ew": {"read_params/1850/0": 4}})
+    try:
+        code, out, err = run_cli(capsys, "read", "--json", sim.address, "param:1850")
+    finally:
+        sim.native.faults.clear()
+    assert code == 0, err
+    value = json_lines(out)["param:1850"]["value"]
+    assert list(value) == sim.state.axis_names()
+
+
 def test_read_table_is_readable(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(capsys, "read", sim.address, "macro:500-501", "status")
     assert code == 0

@@ -206,6 +206,17 @@ def test_poll_plan_forms() -> None:
     assert poll.diags[0].metric_name("Diag") == "Servo/Error"
 
 
+def test_numbered_reads_for_all_axes() -> None:
+    config = parse(_machine_with_poll("""
+        params: [{number: 1850, axis: all}]
+        diags: [{number: 308, axis: ALL, name: Servo/Temperature}]
+    """))
+    poll = config.machines[0].poll
+    assert (poll.params[0].axis, poll.diags[0].axis) == (-1, -1)
+    assert poll.params[0].metric_name("Param") == "Param/1850"
+    assert poll.diags[0].metric_name("Diag") == "Servo/Temperature"
+
+
 @pytest.mark.parametrize(
     ("poll", "expected"),
     [
@@ -226,6 +237,7 @@ def test_poll_plan_forms() -> None:
         ("periods: {status: 10ms}", "machines[0].poll.periods.status: Input should be greater than or equal"),
         ("periods: {status: fast}", "machines[0].poll.periods.status: expected a duration"),
         ("positions: [sideways]", "machines[0].poll.positions[0]: "),
+        ("params: [{number: 1850, axis: some}]", "machines[0].poll.params[0]: axis must be 0..32 or 'all', got 'some'"),
     ],
 )
 def test_poll_plan_errors(poll: str, expected: str) -> None:

@@ -1,0 +1,58 @@
+"""What an MES reads beyond status (issue 18), end to end: simulator over TCP, daemon, real mosquitto."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+
+from edge.config import parse_config
+from edge.daemon import Daemon
+from edge.sim.fleet import Fleet, MachineSpec
+from tests.helpers import Mosquitto, async_wait_for
+from tests.integration.daemon_config import daemon_config
+from tests.integration.mqtt_observer import Observer
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
+    obs = Observer(mosquitto)
+    yield obs
+    obs.close()
+
+
+def json_value(observer: Observer, topic: str) -> object:
+    messages = observer.on(topic)
+    return json.loads(messages[-1].payload)["value"] if messages else None
+
+
+async def test_all_axes_numbers_are_published_per_axis_name(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    """`axis: all`, an axis-0 number the control answers as an all-axes record (diag 308), and one it
+    refuses with EW_ATTRIB at axis 0 (param 1825) are all published as <name>/<axis name>."""
+    faults = {"ew": {"read_params/1825/0": 4}}
+    async with Fleet([MachineSpec(profile="30i", faults=faults)], base_port=0) as fleet:
+        machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, poll: {{periods: {{status: 0.1s, "
+                    f"params: 0.2s, diags: 0.2s}}, params: [{{number: 1850, axis: all}}, 1825], diags: [308]}}}}\n")
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines)))
+        task = asyncio.create_task(daemon.run())
+        state = fleet[0].state
+        names = state.axis_names()
+        try:
+            for folder, number in (("Param", 1850), ("Param", 1825), ("Diag", 308)):
+                for name in names:
+                    await observer.wait_topic(f"focas/m1/state/{folder}/{number}/{name}", timeout=15)
+            await async_wait_for(
+                lambda: [json_value(observer, f"focas/m1/state/Param/1850/{n}") for n in names]
+                == [float(state.read_param_value(1850, i + 1)) for i in range(len(names))],
+                timeout=10, message="per-axis values of 1850")
+            assert not observer.on("focas/m1/state/Param/1825"), "the refused axis-0 form is not published"
+            assert not observer.on("focas/m1/state/Diag/308")
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 20) == 0
