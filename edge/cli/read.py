@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli.named_reads import NAMED_READS, Shaper
 from edge.collect.axis_numbers import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
@@ -90,8 +91,6 @@ def json_value(value: object) -> object:
 
 # ---- target -> reads -> value ----------------------------------------------------------------------
 
-Shaper = Callable[[list[Any]], object]
-
 
 @dataclass(frozen=True, slots=True)
 class ReadPlan:
@@ -110,18 +109,19 @@ class ReadPlan:
 def plan_read(text: str) -> ReadPlan:
     """Raises TargetError for a string that is not a readable target."""
     target = parse_target(text)
+    if isinstance(target, NamedTarget):
+        named = NAMED_READS[target.name]
+        return ReadPlan(text, named.items, named.shape, named.parts)
     items, shape = _reads_for(target)
-    parts = _PARTS.get(target.name, {}) if isinstance(target, NamedTarget) else {}
     per_axis = None
     if isinstance(target, ParamTarget | DiagTarget) and target.axis == 0:
         per_axis_items, per_axis_shape = _reads_for(replace(target, axis=ALL_AXES))
         per_axis = ReadPlan(text, tuple(per_axis_items), per_axis_shape)
-    return ReadPlan(text, tuple(items), shape, parts, per_axis)
+    return ReadPlan(text, tuple(items), shape, per_axis=per_axis)
 
 
 def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
-    if isinstance(target, NamedTarget):
-        return _NAMED[target.name]
+    assert not isinstance(target, NamedTarget)
     if isinstance(target, MacroTarget):
         return [it.ReadMacros(target.first, target.last)], \
             lambda r: _by_number(range(target.first, target.last + 1), r[0], "#")
@@ -162,35 +162,6 @@ def _records(records: Sequence[ParamRecord], bit: int | None, axis_names: Sequen
     if len(records) == 1:
         return one(records[0])
     return {str(r.number): one(r) for r in records}
-
-
-def _positions(results: list[Any]) -> object:
-    names, *kinds = results
-    table: dict[str, dict[str, object]] = {}
-    for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
-        if values is None:  # this kind failed alone (see ReadPlan.parts)
-            continue
-        for name, value in zip(names, values, strict=False):
-            table.setdefault(str(name), {})[kind] = value
-    return table
-
-
-_NAMED: dict[str, tuple[list[it.ReadItem], Shaper]] = {
-    "sysinfo": ([it.ReadSysInfo()], lambda r: r[0]),
-    "status": ([it.ReadStatus()], lambda r: r[0]),
-    "alarms": ([it.ReadAlarmStatus(), it.ReadActiveAlarms(32)],
-               lambda r: {"status": r[0], "active": r[1]}),
-    "program": ([it.ReadProgramNumber(), it.ReadSequenceNumber()],
-                lambda r: {"running": r[0].running, "main": r[0].main, "sequence": r[1]}),
-    "positions": ([it.ReadAxisNames(), *(it.ReadPositions(kind) for kind in it.POSITION_KINDS)], _positions),
-    "clock": ([it.ReadClock()], lambda r: r[0]),
-}
-
-
-# Composite items whose parts may fail alone: item index -> part name.
-_PARTS: dict[str, dict[int, str]] = {
-    "positions": {index + 1: kind for index, kind in enumerate(it.POSITION_KINDS)},
-}
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,8 +259,8 @@ def _flatten(value: object, prefix: str = "") -> list[tuple[str, str]]:
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "read", help="read items from one CNC",
-        description="Read items from one CNC in one batched request. Items: sysinfo status alarms program "
-                    "positions clock macro:500-505 param:6711 param:1815/1 param:1815/0.3 param:1850/all "
+        description="Read items from one CNC in one batched request. Items: "
+                    f"{' '.join(NAMED_READS)} macro:500-505 param:6711 param:1815/1 param:1815/0.3 param:1850/all "
                     "diag:980-981/1 diag:308-309/all "
                     "pmc:D2204.word pmc:R100-R103 pmc:R100.3",
         epilog="Exit codes: 0 every item read, 1 an item or the connection failed, 2 bad usage.")

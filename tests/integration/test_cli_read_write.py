@@ -16,6 +16,8 @@ from typing import Any
 import pytest
 
 from edge.cli import main
+from edge.cli.named_reads import NAMED_READS, TIMER_KINDS
+from edge.targets import READ_NAMES
 from edge.sim.native_server import NativeServer
 from edge.sim.packed_server import PackedServer, start_packed_server
 from edge.sim.state import MachineState
@@ -94,6 +96,30 @@ def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[st
     assert set(rows["positions"]["value"]) == set(sim.state.axis_names())
     assert set(rows["diag:980-981/1"]["value"]) == {"980", "981"}
     assert rows["clock"]["value"][:4].isdigit()
+
+
+def test_every_named_read_offers_what_the_client_reads(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """Loads, names, timers, program name/path/directory: every client function, one JSON shape."""
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, *NAMED_READS)
+    assert code == 0, err
+    rows = json_lines(out)
+    assert set(rows) == set(NAMED_READS) and all(row["error"] is None for row in rows.values())
+    state = sim.state
+    axes, spindles = state.axis_names(), state.spindle_names()
+    loads = rows["loads"]["value"]
+    assert list(loads["servo"]) == axes and list(loads["spindle"]) == spindles
+    assert rows["axes"]["value"] == {"names": axes, "controlled": len(axes)}
+    assert rows["spindles"]["value"] == {"names": spindles}
+    assert set(rows["timers"]["value"]) == set(TIMER_KINDS)
+    assert rows["timers"]["value"]["power_on"]["minutes"] == state.timer(0).minutes
+    program = rows["program"]["value"]
+    assert program["name"] == state.exec_program().name and program["path"] == state.main_program_path()
+    assert [p["number"] for p in rows["programs"]["value"]] == [p.number for p in state.program_directory(1, 19)]
+    assert set(rows["speeds"]["value"]) == {"feed", "spindle"}
+
+
+def test_named_reads_match_the_target_grammar() -> None:
+    assert set(READ_NAMES) == set(NAMED_READS)
 
 
 def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
