@@ -263,10 +263,12 @@ class Periods(_Model):
     pmc: Period = 1.0
     params: Period = 60.0
     diags: Period = 60.0
+    loads: Period = 1.0  # servo load per axis
+    counters: Period = 10.0  # timers (power-on, operating, cutting, cycle) and part totals
 
     @property
     def fastest_s(self) -> float:
-        return min(self.status, self.macros, self.pmc, self.params, self.diags)
+        return min(self.status, self.macros, self.pmc, self.params, self.diags, self.loads, self.counters)
 
 
 def _not_before(end: int | None, start: int | None) -> int | None:
@@ -474,6 +476,9 @@ class PollPlan(_Model):
     periods: Periods = Field(default_factory=Periods)
     positions: list[PositionKind] = Field(default_factory=lambda: [DEFAULT_POSITION])
     part_count: bool = True
+    program_name: bool = True  # Program/Name and Program/MainPath (0xcf, 0xb9)
+    servo_load: bool = True  # Axis/<name>/Load (0x56), loads period
+    timers: bool = True  # Times/PowerOn, Operating, Cutting, Cycle (0x120), counters period
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
@@ -512,6 +517,8 @@ class PollPlan(_Model):
             yield f"diags[{i}]", diag.metric_name("Diag")
         if self.part_count:
             yield "part_count", "Counters/Parts"
+            yield "part_count", "Counters/PartsTotal"
+            yield "part_count", "Counters/PartsRequired"
 
 
 # ---- alarms, writes, machines ---------------------------------------------------------------------------

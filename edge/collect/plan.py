@@ -37,6 +37,8 @@ class Group(enum.Enum):
     PMC = "pmc"
     PARAMS = "params"
     DIAGS = "diags"
+    LOADS = "loads"
+    COUNTERS = "counters"
     ALARM_HISTORY = "alarm_history"
 
     # Identity hash, in C (Enum's is Python code): the schedule hashes groups on every tick.
@@ -92,6 +94,16 @@ ALARM_EVENT = MetricSpec("Alarm/Event", MetricType.STRING, description="JSON rai
 ALARM_HISTORY = MetricSpec("Alarm/History", MetricType.STRING, description="JSON alarm history entry")
 ALARM_STATUS = MetricSpec("Alarm/Status", MetricType.UINT32, description="alarm status bits")
 PART_COUNT = MetricSpec("Counters/Parts", MetricType.INT64, description="parameter 6711")
+PART_TOTAL_PARAM = 6712
+PART_REQUIRED_PARAM = 6713
+PART_TOTAL = MetricSpec("Counters/PartsTotal", MetricType.INT64, description="parameter 6712")
+PART_REQUIRED = MetricSpec("Counters/PartsRequired", MetricType.INT64, description="parameter 6713")
+PROGRAM_NAME = MetricSpec("Program/Name", MetricType.STRING, description="running program (cnc_exeprgname)")
+PROGRAM_MAIN_PATH = MetricSpec("Program/MainPath", MetricType.STRING, description="main program (cnc_pdf_rdmain)")
+# cnc_rdtimer types 0..3 (4, the free-purpose timer, is not a plant figure).
+TIMER_FOLDERS = ("PowerOn", "Operating", "Cutting", "Cycle")
+TIMER_METRICS = tuple(MetricSpec(f"Times/{name}", MetricType.DOUBLE, "s", description=f"cnc_rdtimer type {kind}")
+                      for kind, name in enumerate(TIMER_FOLDERS))
 AXIS_NAMES = MetricSpec("Device/AxisNames", MetricType.STRING)
 SPINDLE_NAMES = MetricSpec("Device/SpindleNames", MetricType.STRING)
 
@@ -141,6 +153,7 @@ class MachinePlan:
         static = static or StaticInfo()
         poll = machine.poll
         reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
+        reads += _program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
         reads += _macro_reads(machine)
         reads += _pmc_reads(machine)
@@ -151,6 +164,7 @@ class MachinePlan:
         periods = {Group.STATUS: poll.periods.status, Group.ACTIVE_ALARMS: poll.periods.status,
                    Group.MACROS: poll.periods.macros, Group.PMC: poll.periods.pmc,
                    Group.PARAMS: poll.periods.params, Group.DIAGS: poll.periods.diags,
+                   Group.LOADS: poll.periods.loads, Group.COUNTERS: poll.periods.counters,
                    Group.ALARM_HISTORY: alarms.history_interval}
         return cls(tuple(reads), periods)
 
@@ -223,6 +237,32 @@ def _status_reads(positions: Sequence[str], part_count: bool, static: StaticInfo
     if part_count:
         part_count_read = it.ReadParams(PART_COUNT_PARAM, PART_COUNT_PARAM)
         reads.append(PlannedRead(Group.STATUS, part_count_read, (PART_COUNT,)))
+    return reads
+
+
+def _program_reads(machine: MachineConfig) -> list[PlannedRead]:
+    if not machine.poll.program_name:
+        return []
+    return [PlannedRead(Group.STATUS, it.ReadExecProgramName(), (PROGRAM_NAME,)),
+            PlannedRead(Group.STATUS, it.ReadMainProgramPath(), (PROGRAM_MAIN_PATH,))]
+
+
+def _load_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+    if not machine.poll.servo_load or not static.axis_names:
+        return []
+    specs = tuple(MetricSpec(f"Axis/{axis}/Load", MetricType.DOUBLE, "%", description="servo load meter")
+                  for axis in static.axis_names)
+    return [PlannedRead(Group.LOADS, it.ReadServoMeter(), specs)]
+
+
+def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
+    poll = machine.poll
+    reads = []
+    if poll.timers:
+        reads += [PlannedRead(Group.COUNTERS, it.ReadTimer(kind), (spec,)) for kind, spec in enumerate(TIMER_METRICS)]
+    if poll.part_count:
+        reads += [PlannedRead(Group.COUNTERS, it.ReadParams(number, number), (spec,))
+                  for number, spec in ((PART_TOTAL_PARAM, PART_TOTAL), (PART_REQUIRED_PARAM, PART_REQUIRED))]
     return reads
 
 
@@ -324,6 +364,10 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return lambda result: [pick(result) for _, pick in SYSINFO_METRICS]
         case it.ReadProgramNumber():
             return lambda result: [result.running, result.main]
+        case it.ReadExecProgramName():
+            return lambda result: [result.name]
+        case it.ReadTimer():
+            return lambda result: [result.minutes * 60 + result.msec / 1000]
         case it.ReadActiveAlarms():
             return _alarm_values
         case it.ReadAxisNames() | it.ReadSpindleNames():
@@ -332,7 +376,7 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return lambda result: list(result[0].values)
         case it.ReadParams() | it.ReadDiag():
             return lambda result: [record.value for record in result]
-        case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions():
+        case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions() | it.ReadServoMeter():
             return _as_list
         case it.ReadAlarmHistory():
             return lambda result: []  # published per entry as events, see edge.collect.alarms
