@@ -472,6 +472,9 @@ class NumberedItem(_Model):
         return f"{folder}/{self.number}" + (f"/{self.axis}" if self.axis > 0 else "")
 
 
+MAX_TOOL_OFFSETS = 400
+
+
 class PollPlan(_Model):
     periods: Periods = Field(default_factory=Periods)
     positions: list[PositionKind] = Field(default_factory=lambda: [DEFAULT_POSITION])
@@ -479,6 +482,8 @@ class PollPlan(_Model):
     program_name: bool = True  # Program/Name and Program/MainPath (0xcf, 0xb9)
     servo_load: bool = True  # Axis/<name>/Load (0x56), loads period
     timers: bool = True  # Times/PowerOn, Operating, Cutting, Cycle (0x120), counters period
+    operator_messages: bool = True  # Message/Operator (0x34), status group
+    tool_offsets: int = Field(default=0, ge=0, le=MAX_TOOL_OFFSETS)  # offsets 1..n of each kind (0x08), counters
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
@@ -515,6 +520,9 @@ class PollPlan(_Model):
             yield f"params[{i}]", param.metric_name("Param")
         for i, diag in enumerate(self.diags):
             yield f"diags[{i}]", diag.metric_name("Diag")
+        for n in range(1, self.tool_offsets + 1):
+            for folder in ("LengthGeometry", "LengthWear", "RadiusGeometry", "RadiusWear"):
+                yield "tool_offsets", f"Tool/{n}/{folder}"
         if self.part_count:
             yield "part_count", "Counters/Parts"
             yield "part_count", "Counters/PartsTotal"

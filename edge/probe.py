@@ -113,6 +113,8 @@ def probe_items() -> list[it.ReadItem]:
         it.ReadMacros(*PROBE_MACROS), it.ReadPmc(*PROBE_PMC, PmcType.BYTE), it.ReadClock(),
     ]
     items += [it.ReadTimer(kind) for kind in range(5)]
+    items += [it.ReadToolOffsets(kind, 1, 1) for kind in range(len(it.TOOL_OFFSET_KINDS))]
+    items.append(it.ReadOperatorMessages())
     items.append(it.ReadAlarmHistory(PROBE_ALARM_HISTORY_DEPTH))
     return items
 
@@ -128,6 +130,8 @@ def describe_arguments(item: it.ReadItem) -> str:
             return f"{area}{start}..{area}{end} {data_type.name.lower()}"
         case it.ReadPositions(kind=kind):
             return kind
+        case it.ReadToolOffsets(kind=kind, first=first, count=count):
+            return f"{it.TOOL_OFFSET_KINDS[kind]} {first}..{first + count - 1}"
         case it.ReadTimer(kind=kind):
             return f"kind {kind}"
         case it.ReadControlledAxes(what=what):

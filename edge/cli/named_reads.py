@@ -17,6 +17,7 @@ from edge.focas import items as it
 Shaper = Callable[[list[Any]], object]
 
 TIMER_KINDS = ("power_on", "operating", "cutting", "cycle", "free")  # cnc_rdtimer type 0..4
+TOOL_OFFSETS_SHOWN = 16  # offsets 1..16 of each kind
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +63,15 @@ def _loads(results: list[Any]) -> object:
     return {kind: value for kind, value in loads.items() if value is not None}
 
 
+def _tool_offsets(results: list[Any]) -> object:
+    """{offset number: {kind: value}} for the kinds the control answered."""
+    table: dict[str, dict[str, object]] = {}
+    for kind, values in zip(it.TOOL_OFFSET_KINDS, results, strict=True):
+        for number, value in enumerate(values or (), start=1):
+            table.setdefault(str(number), {})[kind] = value
+    return table
+
+
 def _named_parts(names: Sequence[str], first: int = 0) -> dict[int, str]:
     return {first + index: name for index, name in enumerate(names)}
 
@@ -89,5 +99,9 @@ NAMED_READS: dict[str, NamedRead] = {
                        _loads, {1: "servo", 3: "spindle"}),
     "timers": NamedRead(tuple(it.ReadTimer(kind) for kind in range(len(TIMER_KINDS))),
                         _dropping_none(TIMER_KINDS), _named_parts(TIMER_KINDS)),
+    "messages": NamedRead((it.ReadOperatorMessages(),), lambda r: r[0]),
+    "tool_offsets": NamedRead(tuple(it.ReadToolOffsets(kind, 1, TOOL_OFFSETS_SHOWN)
+                                    for kind in range(len(it.TOOL_OFFSET_KINDS))),
+                              _tool_offsets, _named_parts(it.TOOL_OFFSET_KINDS)),
     "clock": NamedRead((it.ReadClock(),), lambda r: r[0]),
 }

@@ -102,6 +102,9 @@ PROGRAM_NAME = MetricSpec("Program/Name", MetricType.STRING, description="runnin
 PROGRAM_MAIN_PATH = MetricSpec("Program/MainPath", MetricType.STRING, description="main program (cnc_pdf_rdmain)")
 # cnc_rdtimer types 0..3 (4, the free-purpose timer, is not a plant figure).
 TIMER_FOLDERS = ("PowerOn", "Operating", "Cutting", "Cycle")
+OPERATOR_MESSAGE = MetricSpec("Message/Operator", MetricType.STRING,
+                              description="JSON list of operator messages (cnc_rdopmsg)")
+TOOL_OFFSET_FOLDERS = ("LengthGeometry", "LengthWear", "RadiusGeometry", "RadiusWear")  # 0x08 type 0..3
 TIMER_METRICS = tuple(MetricSpec(f"Times/{name}", MetricType.DOUBLE, "s", description=f"cnc_rdtimer type {kind}")
                       for kind, name in enumerate(TIMER_FOLDERS))
 AXIS_NAMES = MetricSpec("Device/AxisNames", MetricType.STRING)
@@ -202,7 +205,7 @@ def drop_key(item: it.ReadItem) -> str:
     match item:
         case it.ReadPositions(kind=kind):
             return f"{item.operation}:{kind}"
-        case it.ReadTimer(kind=kind):
+        case it.ReadTimer(kind=kind) | it.ReadToolOffsets(kind=kind):
             return f"{item.operation}:{kind}"
     return item.operation
 
@@ -241,10 +244,13 @@ def _status_reads(positions: Sequence[str], part_count: bool, static: StaticInfo
 
 
 def _program_reads(machine: MachineConfig) -> list[PlannedRead]:
-    if not machine.poll.program_name:
-        return []
-    return [PlannedRead(Group.STATUS, it.ReadExecProgramName(), (PROGRAM_NAME,)),
-            PlannedRead(Group.STATUS, it.ReadMainProgramPath(), (PROGRAM_MAIN_PATH,))]
+    reads = []
+    if machine.poll.program_name:
+        reads += [PlannedRead(Group.STATUS, it.ReadExecProgramName(), (PROGRAM_NAME,)),
+                  PlannedRead(Group.STATUS, it.ReadMainProgramPath(), (PROGRAM_MAIN_PATH,))]
+    if machine.poll.operator_messages:
+        reads.append(PlannedRead(Group.STATUS, it.ReadOperatorMessages(), (OPERATOR_MESSAGE,)))
+    return reads
 
 
 def _load_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
@@ -260,6 +266,10 @@ def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
     reads = []
     if poll.timers:
         reads += [PlannedRead(Group.COUNTERS, it.ReadTimer(kind), (spec,)) for kind, spec in enumerate(TIMER_METRICS)]
+    count = poll.tool_offsets
+    for kind, folder in enumerate(TOOL_OFFSET_FOLDERS) if count else ():
+        specs = tuple(MetricSpec(f"Tool/{n}/{folder}", MetricType.DOUBLE) for n in range(1, count + 1))
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadToolOffsets(kind, 1, count), specs))
     if poll.part_count:
         reads += [PlannedRead(Group.COUNTERS, it.ReadParams(number, number), (spec,))
                   for number, spec in ((PART_TOTAL_PARAM, PART_TOTAL), (PART_REQUIRED_PARAM, PART_REQUIRED))]
@@ -376,7 +386,11 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return lambda result: list(result[0].values)
         case it.ReadParams() | it.ReadDiag():
             return lambda result: [record.value for record in result]
-        case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions() | it.ReadServoMeter():
+        case it.ReadOperatorMessages():
+            return lambda result: [json.dumps([{"number": m.number, "type": m.type, "text": m.text} for m in result],
+                                              separators=(",", ":"))]
+        case (it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions() | it.ReadServoMeter()
+              | it.ReadToolOffsets()):
             return _as_list
         case it.ReadAlarmHistory():
             return lambda result: []  # published per entry as events, see edge.collect.alarms

@@ -137,6 +137,15 @@ class ProgramDirEntry:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """cnc_rdopmsg: a message the machine shows its operator (number, kind, text)."""
+
+    number: int
+    type: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
 class TimerValue:
     """cnc_rdtimer: minutes plus milliseconds."""
 

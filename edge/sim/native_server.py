@@ -206,6 +206,8 @@ HANDLERS: dict[Function, Handler] = {
     fn.READ_CLOCK: _clock,
     fn.SET_TIME: _set_time,
     fn.READ_TIMER: lambda s, r, c: s.timer(r.args[0]),
+    fn.TOOL_OFFSETS: lambda s, r, c: s.tool_offsets(r.args[2], r.args[0], r.args[1]),
+    fn.OPERATOR_MESSAGES: lambda s, r, c: s.operator_messages(),
 }
 
 

@@ -67,6 +67,7 @@ def every_item() -> list[it.ReadItem]:
         it.ReadDiag(0, 9999, -1), it.ReadMacros(100, 199), it.ReadMacros(500, 999),
         it.ReadPmc("D", 2204, 2205, PmcType.WORD), it.ReadPmc("G", 0, 31), it.ReadPmc("R", 100, 107, PmcType.LONG),
         it.ReadClock(), *(it.ReadTimer(kind) for kind in range(5)),
+        *(it.ReadToolOffsets(kind, 3, 4) for kind in range(4)), it.ReadOperatorMessages(),
     ]
 
 
@@ -81,6 +82,7 @@ def expected_values(fleet: Fleet) -> list[object]:
         s.read_diag(0, 9999, -1), s.read_macros(100, 199), s.read_macros(500, 999),
         [600], s.read_pmc("G", 0, 31), s.read_pmc("R", 100, 107, PmcType.LONG),
         s.clock().replace(microsecond=0), *(s.timer(kind) for kind in range(5)),
+        *(s.tool_offsets(kind, 3, 6) for kind in range(4)), s.operator_messages(),
     ]
 
 

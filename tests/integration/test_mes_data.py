@@ -61,22 +61,26 @@ async def test_all_axes_numbers_are_published_per_axis_name(
 async def test_program_loads_times_and_part_totals_are_published(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
     """The running program's name and main path, servo load per axis name, the four plant timers in
-    seconds, and the part total/required counters, from the functions the client already had."""
+    seconds, the part total/required counters, operator messages and tool offsets."""
     async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
         machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, "
-                    f"poll: {{periods: {{status: 0.1s, loads: 0.2s, counters: 0.5s}}}}}}\n")
+                    f"poll: {{periods: {{status: 0.1s, loads: 0.2s, counters: 0.5s}}, tool_offsets: 2}}}}\n")
         daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines)))
         task = asyncio.create_task(daemon.run())
         state = fleet[0].state
         try:
             topics = ["Program/Name", "Program/MainPath", "Times/PowerOn", "Times/Operating", "Times/Cutting",
-                      "Times/Cycle", "Counters/PartsTotal", "Counters/PartsRequired",
+                      "Times/Cycle", "Counters/PartsTotal", "Counters/PartsRequired", "Message/Operator",
+                      "Tool/1/LengthGeometry", "Tool/2/RadiusWear",
                       *(f"Axis/{name}/Load" for name in state.axis_names())]
             for topic in topics:
                 await observer.wait_topic(f"focas/m1/state/{topic}", timeout=15)
             assert json_value(observer, "focas/m1/state/Program/Name") == state.exec_program().name
             assert json_value(observer, "focas/m1/state/Program/MainPath") == state.main_program_path()
             assert json_value(observer, "focas/m1/state/Counters/PartsRequired") == state.read_param_value(6713, 0)
+            assert json_value(observer, "focas/m1/state/Tool/2/RadiusWear") == state.tool_offsets(3, 2, 2)[0]
+            messages = json.loads(str(json_value(observer, "focas/m1/state/Message/Operator")))
+            assert isinstance(messages, list) and all(set(m) == {"number", "type", "text"} for m in messages)
             power_on = json_value(observer, "focas/m1/state/Times/PowerOn")
             assert isinstance(power_on, float) and power_on > 0
             birth = observer.of("DBIRTH")[-1].spb()
