@@ -47,7 +47,6 @@ log = logging.getLogger(__name__)
 
 DROPPED_FUNCTIONS = MetricSpec("Plan/DroppedFunctions", MetricType.STRING,
                                description="functions this control does not answer (EW_FUNC/EW_NOOPT)")
-CONNECTED = MetricSpec("Connection/Online", MetricType.BOOLEAN)
 
 
 class DeviceSink(Protocol):
