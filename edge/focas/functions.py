@@ -306,13 +306,22 @@ def _scaled_list_encode(value: Sequence[float | None], req: RequestSubpacket, ct
     return encode_scaled_list(value)
 
 
-def _macros_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[float | None]:
-    expected = req.args[1] - req.args[0] + 1
-    values = decode_scaled_list(payload)
-    if len(values) != expected:
-        raise ProtocolError(f"macro read #{req.args[0]}..#{req.args[1]}: expected {expected} values, "
-                            f"got {len(values)}")
-    return values
+def _counted_scaled_list(what: str, prefix: str = "") -> PayloadDecoder:
+    """A decoder of one 8-B scaled value per number args[0]..args[1], the count checked."""
+
+    def decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[float | None]:
+        expected = req.args[1] - req.args[0] + 1
+        values = decode_scaled_list(payload)
+        if len(values) != expected:
+            raise ProtocolError(f"{what} {prefix}{req.args[0]}..{prefix}{req.args[1]}: expected {expected} "
+                                f"values, got {len(values)}")
+        return values
+
+    return decode
+
+
+_macros_decode = _counted_scaled_list("macro read", "#")
+_tool_offsets_decode = _counted_scaled_list("tool offsets")
 
 
 NAME_SLOT = 4
@@ -462,15 +471,6 @@ def _pmc_write_extra(req: RequestSubpacket, ctx: Context) -> bytes:
         raise ProtocolError(f"PMC write {start}..{end}: expected {end - start + 1} data bytes, "
                             f"got {len(req.extra)}")
     return bytes(req.extra)
-
-
-def _tool_offsets_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[float | None]:
-    expected = req.args[1] - req.args[0] + 1
-    values = decode_scaled_list(payload)
-    if len(values) != expected:
-        raise ProtocolError(f"tool offsets {req.args[0]}..{req.args[1]}: expected {expected} values, "
-                            f"got {len(values)}")
-    return values
 
 
 _OPMSG_HEAD = struct.Struct(">iii")

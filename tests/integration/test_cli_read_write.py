@@ -122,14 +122,20 @@ def test_named_reads_match_the_target_grammar() -> None:
     assert set(READ_NAMES) == set(NAMED_READS)
 
 
+def read_with_ew(sim: Sim, capsys: pytest.CaptureFixture[str], ew: dict[str, int],
+                 *items: str) -> tuple[int, str, str]:
+    """`focas-edge read --json` while the simulator answers these EW codes."""
+    sim.native.faults.update({"ew": ew})
+    try:
+        return run_cli(capsys, "read", "--json", sim.address, *items)
+    finally:
+        sim.native.faults.clear()
+
+
 def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     """One position kind answered EW_NOOPT (as a real EDM answers distance-to-go): the other kinds are
     printed, the refused one is named on stderr, the item does not fail."""
-    sim.native.faults.update({"ew": {"positions/7": 6}})
-    try:
-        code, out, err = run_cli(capsys, "read", "--json", sim.address, "positions")
-    finally:
-        sim.native.faults.clear()
+    code, out, err = read_with_ew(sim, capsys, {"positions/7": 6}, "positions")
     assert code == 0, err
     row = json_lines(out)["positions"]
     assert row["error"] is None
@@ -152,11 +158,7 @@ def test_all_axes_reads_are_keyed_by_axis_name(sim: Sim, capsys: pytest.CaptureF
 
 def test_axis_type_number_refused_at_axis_0_is_read_per_axis(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     """A control answering EW_ATTRIB for an axis-type number read with axis 0: read it for every axis."""
-    sim.native.faults.update({"ew": {"read_params/1850/0": 4}})
-    try:
-        code, out, err = run_cli(capsys, "read", "--json", sim.address, "param:1850")
-    finally:
-        sim.native.faults.clear()
+    code, out, err = read_with_ew(sim, capsys, {"read_params/1850/0": 4}, "param:1850")
     assert code == 0, err
     value = json_lines(out)["param:1850"]["value"]
     assert list(value) == sim.state.axis_names()
