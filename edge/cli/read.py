@@ -51,13 +51,22 @@ def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
                         help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
                         help=f"connect and request timeout (default {DEFAULT_TIMEOUT:g})")
+    parser.add_argument("--path", type=int, default=1, metavar="N",
+                        help="CNC path to read or write (a twin-turret lathe has 2; default 1)")
 
 
 def open_cnc(args: argparse.Namespace) -> Any:
     """An unconnected session for the CLI's address/transport/timeout; ConfigError on a bad address."""
     from edge.focas.connect import open_session
 
-    return open_session(args.transport, args.address, timeout=args.timeout, connect_timeout=args.timeout)
+    path = getattr(args, "path", 1)
+    if path < 1:
+        raise ConfigError([f"--path {path}: paths are numbered from 1"])
+    if path != 1 and args.transport != "focas":
+        raise ConfigError([f"--path {path}: the {args.transport} transport reads path 1 only"])
+    extra = {"path": path} if path != 1 else {}
+    return open_session(args.transport, args.address, timeout=args.timeout, connect_timeout=args.timeout,
+                        **extra)
 
 
 def describe_error(exc: BaseException) -> str:

@@ -184,6 +184,14 @@ class ReadOperatorMessages(ReadItem):
 
 
 @dataclass(frozen=True, slots=True)
+class ReadPathStatus(ReadItem):
+    """-> StatInfo of one CNC path, whatever path the session reads (path discovery: a control answers a
+    path it does not have with EW_PATH)"""
+
+    path: int = 1
+
+
+@dataclass(frozen=True, slots=True)
 class ReadAlarmHistory(ReadItem):
     """-> list[AlarmHistoryEntry], newest first, at most `depth` (clamped to 1..250)"""
 

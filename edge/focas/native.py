@@ -69,7 +69,7 @@ SUPPORTED_ITEMS: frozenset[str] = frozenset(
     {cls.__name__ for cls in _SIMPLE}
     | {"ReadActiveAlarms", "ReadProgramDirectory", "ReadSpindleLoad", "ReadPositions", "ReadServoMeter",
        "ReadControlledAxes", "ReadParams", "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer",
-       "ReadToolOffsets"}
+       "ReadToolOffsets", "ReadPathStatus"}
 )
 
 SPINDLE_LOAD_ARGS = (4, -1)  # HslCommunication: kind 4 = load, all spindles
@@ -134,6 +134,8 @@ def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
             return ItemPlan(item, calls, _clock)
         case it.ReadTimer(kind=kind):
             return _one(item, fn.READ_TIMER, kind, path=path)
+        case it.ReadPathStatus(path=other):
+            return _one(item, fn.STATINFO, path=other)
         case it.ReadToolOffsets(kind=kind, first=first, count=count):
             if count < 1 or not 0 <= kind < len(it.TOOL_OFFSET_KINDS):
                 raise ValueError(f"tool offsets: kind {kind} (0..3) and count {count} (>= 1)")

@@ -225,8 +225,10 @@ def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPl
     forced = faults.ew_for(req.command, name, req.args) if faults else None
     if forced is not None:
         return error_response(req, forced)
-    if req.path != 1:
+    path_state = state.for_path(req.path)
+    if path_state is None:
         return error_response(req, EW_PATH)
+    state = path_state
     if function is None or req.command in state.profile.refused_commands or function not in HANDLERS:
         return error_response(req, EW_FUNC)
     try:
@@ -377,8 +379,10 @@ def _constant(answer: bytes) -> AnswerSource:
 def _answer_source(state: MachineState, req: RequestSubpacket, function: Function | None,
                    ctx: Context) -> AnswerSource:
     """answer_subpacket's decision tree, taken once: path, then function, then the data."""
-    if req.path != 1:
+    path_state = state.for_path(req.path)
+    if path_state is None:
         return _constant(error_response(req, EW_PATH).encode())
+    state = path_state
     if function is None or req.command in state.profile.refused_commands or function not in HANDLERS:
         return _constant(error_response(req, EW_FUNC).encode())
     return _guarded(req, _payload_source(state, req, function, ctx))

@@ -40,6 +40,7 @@ class Profile:
     pmc_sizes: dict[str, int] = field(default_factory=lambda: dict(PMC_SIZES_30I))
     pmc_float_types: bool = True  # PMC data types 4/5 (float/double) exist on 30i-B/0i-F only
     timer_little_endian: bool = False  # a 31i-B sends cnc_rdtimer's payload little-endian (LMX 5f0a528)
+    paths: int = 1  # CNC paths (a twin-turret lathe has 2); requests for a path beyond answer EW_PATH
 
     @property
     def wide_records(self) -> bool:
@@ -99,6 +100,15 @@ PROFILES: dict[str, Profile] = {
         spindle_names=("S1", "S2"),
         response_version=3,
         timer_little_endian=True,
+    ),
+    "31i-2p": Profile(
+        name="31i-2p",
+        sysinfo=_sysinfo(0x0202, 32, "31", " T", "G42A", "20.0", 3),
+        axis_names=("X", "Z", "C"),
+        spindle_names=("S1", "S2"),
+        response_version=3,
+        timer_little_endian=True,
+        paths=2,
     ),
 }
 PROFILE_ALIASES = {"0i": "0i-F", "0if": "0i-F", "16": "16i", "30": "30i", "31": "31i", "31i-b": "31i"}

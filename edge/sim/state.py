@@ -26,7 +26,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime, tzinfo
 from typing import NamedTuple
 from zoneinfo import ZoneInfo
@@ -240,9 +240,11 @@ class MachineState:
         cycle: CycleSpec | None = None,
         seed: int = 0,
         start_parts: int = 0,
+        path: int = 1,
     ) -> None:
         self.profile = get_profile(profile) if isinstance(profile, str) else profile
         self.name = name
+        self.path = path
         self.cycle = cycle or CycleSpec()
         self.seed = seed
         self._time = time_source
@@ -271,6 +273,18 @@ class MachineState:
         self._seed_history()
         self._processed = self._phase
         self._refresh_signals(self._phase)
+        # Path 1 owns the further paths of a multi-path control, each running its own program and cycle.
+        self._paths: dict[int, MachineState] = {path: self}
+        for other in range(2, self.profile.paths + 1) if path == 1 else ():
+            cycle_of_path = replace(self.cycle, program_number=self.cycle.program_number + 1000 * (other - 1),
+                                    cut_seconds=self.cycle.cut_seconds * (1 + 0.25 * (other - 1)))
+            self._paths[other] = MachineState(self.profile, name=f"{name}/path{other}", time_source=time_source,
+                                              timezone=timezone, clock_offset=clock_offset, cycle=cycle_of_path,
+                                              seed=seed + 17 * (other - 1), start_parts=start_parts, path=other)
+
+    def for_path(self, path: int) -> MachineState | None:
+        """The state answering requests for CNC path `path` (None: the control has no such path)."""
+        return self._paths.get(path)
 
     # ---- time --------------------------------------------------------------------------------------
     def now(self) -> float:

@@ -164,6 +164,15 @@ def test_axis_type_number_refused_at_axis_0_is_read_per_axis(sim: Sim, capsys: p
     assert list(value) == sim.state.axis_names()
 
 
+def test_path_option_reads_that_path(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """The simulated 30i has one path: path 2 is refused with EW_PATH, by the CNC, naming it."""
+    code, out, err = run_cli(capsys, "read", "--json", "--path", "2", sim.address, "status")
+    assert code == 1
+    assert json_lines(out)["status"]["error"]["code"] == "EW_PATH" and "EW_PATH" in err
+    code, _, err = run_cli(capsys, "read", "--transport", "packed", "--path", "2", "unix:/tmp/x.sock", "status")
+    assert code == 2 and "reads path 1 only" in err
+
+
 def test_read_table_is_readable(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(capsys, "read", sim.address, "macro:500-501", "status")
     assert code == 0

@@ -9,9 +9,15 @@ from pathlib import Path
 
 import pytest
 
+from edge.cli import main
 from edge.config import parse_config
 from edge.daemon import Daemon
-from edge.sim.fleet import Fleet, MachineSpec
+from edge.focas import items as it
+from edge.focas.client import FocasClient
+from edge.focas.errors import EW_PATH, CncError
+from edge.focas.paths import path_count
+from edge.probe import probe
+from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer
@@ -89,3 +95,37 @@ async def test_program_loads_times_and_part_totals_are_published(
         finally:
             daemon.request_stop()
             assert await asyncio.wait_for(task, 20) == 0
+
+
+async def test_a_two_path_lathe_answers_each_path_and_refuses_a_third() -> None:
+    """Path discovery counts the paths before the first EW_PATH; a client on path 2 reads that path's own
+    program; a single-path control has one path."""
+    async with Fleet([MachineSpec(profile="31i-2p"), MachineSpec(profile="31i")], base_port=0) as fleet:
+        lathe, single = fleet[0], fleet[1]
+        second = lathe.state.for_path(2)
+        assert second is not None and lathe.state.for_path(3) is None
+        async with FocasClient("127.0.0.1", lathe.port, timeout=2) as cnc:
+            assert await path_count(cnc) == 2
+            (refused,) = await cnc.batch([it.ReadPathStatus(3)])
+            assert isinstance(refused, CncError) and refused.code == EW_PATH
+        async with FocasClient("127.0.0.1", lathe.port, timeout=2, path=2) as cnc2:
+            numbers = await cnc2.read(it.ReadProgramNumber())
+        assert numbers == second.program_numbers() != lathe.state.program_numbers()
+        async with FocasClient("127.0.0.1", single.port, timeout=2) as cnc:
+            assert await path_count(cnc) == 1
+        report = await probe(FocasClient("127.0.0.1", lathe.port, timeout=2), "sim-31i-2p")
+    assert report.paths == 2 and report.complete
+
+
+def test_cli_reads_and_writes_name_their_path(capsys: pytest.CaptureFixture[str]) -> None:
+    """`--path 2` reads path 2's program and writes path 2's macro; path 1 keeps its own."""
+    with FleetThread(Fleet([MachineSpec(profile="31i-2p")], base_port=0)) as fleet:
+        state = fleet[0].state
+        second = state.for_path(2)
+        assert second is not None
+        address = f"127.0.0.1:{fleet[0].port}"
+        assert main(["--log-level", "WARNING", "write", "--path", "2", address, "macro:510=7.5"]) == 0
+        assert main(["--log-level", "WARNING", "read", "--json", "--path", "2", address, "program"]) == 0
+        out = capsys.readouterr().out.splitlines()[-1]
+    assert json.loads(out)["value"]["running"] == second.program_numbers().running
+    assert second.read_macro(510) == 7.5 and state.read_macro(510) != 7.5

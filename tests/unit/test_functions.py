@@ -250,7 +250,7 @@ def test_every_item_class_is_planned() -> None:
                it.ReadSpindleLoad(), it.ReadPositions("machine"), it.ReadAxisNames(), it.ReadSpindleNames(),
                it.ReadServoMeter(), it.ReadControlledAxes(), it.ReadParams(1, 2), it.ReadDiag(1, 2),
                it.ReadMacros(1, 2), it.ReadPmc("D", 0, 3, PmcType.WORD), it.ReadClock(), it.ReadTimer(1),
-               it.ReadToolOffsets(1, 1, 4), it.ReadOperatorMessages()]
+               it.ReadToolOffsets(1, 1, 4), it.ReadOperatorMessages(), it.ReadPathStatus(2)]
     all_items = {cls.__name__ for cls in vars(it).values()
                  if isinstance(cls, type) and issubclass(cls, it.ReadItem) and cls is not it.ReadItem}
     assert {s.operation for s in samples} == SUPPORTED_ITEMS == all_items - {"ReadAlarmHistory"}
