@@ -615,6 +615,9 @@ class Timeouts(_Model):
 _PACKED_ADDRESS_RE = re.compile(r"tcp:[^:\s]+:\d{1,5}|unix:/\S+", re.ASCII)
 
 
+MAX_PATHS = 10  # the most paths a 30i-B series control offers
+
+
 class MachineConfig(_Model):
     id: SparkplugId
     host: str | None = None
@@ -630,6 +633,16 @@ class MachineConfig(_Model):
     poll: PollPlan = Field(default_factory=PollPlan)
     alarms: AlarmsConfig | None = None
     writes: MachineWrites | None = None
+    # CNC paths to poll (a twin-turret lathe has 2): path 1 is this machine's device, path n the device
+    # `<id>-path<n>` (see path_devices). `path` is the one this entry's session reads.
+    paths: int = Field(default=1, ge=1, le=MAX_PATHS)
+    path: int = Field(default=1, ge=1, le=MAX_PATHS)
+
+    def path_devices(self) -> list[MachineConfig]:
+        """This machine, then one entry per further path: same settings, id `<id>-path<n>`, path n."""
+        others = [self.model_copy(update={"id": f"{self.id}-path{n}", "path": n, "paths": 1})
+                  for n in range(2, self.paths + 1)]
+        return [self, *others]
 
     @field_validator("timezone")
     @classmethod
@@ -741,8 +754,12 @@ class Config(_Model):
         """state_dir from the file, else $STATE_DIRECTORY (systemd), else /var/lib/focas-edge."""
         return self.state_dir if self.state_dir is not None else self._state_dir
 
+    def devices(self) -> list[MachineConfig]:
+        """Every polled device: each machine, and for a multi-path machine one entry per further path."""
+        return [device for machine in self.machines for device in machine.path_devices()]
+
     def machine(self, machine_id: str) -> MachineConfig:
-        for machine in self.machines:
+        for machine in self.devices():
             if machine.id == machine_id:
                 return machine
         raise KeyError(machine_id)

@@ -152,7 +152,9 @@ SessionFactory = Callable[[MachineConfig], CncSession]
 
 def default_session(machine: MachineConfig) -> CncSession:
     timeouts = machine.timeouts
-    extra = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
+    extra: dict[str, int] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
+    if machine.path != 1:
+        extra["path"] = machine.path
     return open_session(machine.transport, machine.endpoint, timeout=timeouts.request_s,
                         connect_timeout=timeouts.connect_s, backoff_initial=timeouts.backoff_initial_s,
                         backoff_max=timeouts.backoff_max_s, **extra)

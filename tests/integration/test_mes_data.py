@@ -129,3 +129,34 @@ def test_cli_reads_and_writes_name_their_path(capsys: pytest.CaptureFixture[str]
         out = capsys.readouterr().out.splitlines()[-1]
     assert json.loads(out)["value"]["running"] == second.program_numbers().running
     assert second.read_macro(510) == 7.5 and state.read_macro(510) != 7.5
+
+
+async def test_each_path_of_a_two_path_lathe_is_a_device_of_its_own(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    """`paths: 2`: path 1 keeps the machine's device and topics, path 2 is device `<machine>-path2` with its
+    own program, and a write to that device's command topic lands on path 2."""
+    async with Fleet([MachineSpec(profile="31i-2p")], base_port=0) as fleet:
+        machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, paths: 2, "
+                    f"poll: {{periods: {{status: 0.1s}}}}}}\n")
+        extra = "writes: {enabled: true, allow: [{target: 'macro:500-599'}]}\n"
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines, extra)))
+        task = asyncio.create_task(daemon.run())
+        state = fleet[0].state
+        second = state.for_path(2)
+        assert second is not None
+        try:
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
+            await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1-path2", timeout=15)
+            await observer.wait_topic("focas/m1-path2/state/Program/Number", timeout=15)
+            await observer.wait_topic("focas/m1/state/Program/Number", timeout=15)
+            assert json_value(observer, "focas/m1-path2/state/Program/Number") == second.program_numbers().running
+            assert json_value(observer, "focas/m1/state/Program/Number") == state.program_numbers().running
+            await observer.publish("focas/m1-path2/cmd", json.dumps(
+                {"id": "p2", "target": "macro:520", "value": 4.5}).encode())
+            await observer.wait_topic("focas/m1-path2/cmd/reply", timeout=15)
+            reply = json.loads(observer.on("focas/m1-path2/cmd/reply")[-1].payload)
+            assert reply["ok"] is True, reply
+            assert second.read_macro(520) == 4.5 and state.read_macro(520) != 4.5
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 20) == 0
