@@ -669,6 +669,8 @@ class MachineConfig(_Model):
             raise _at("host", "required" + (" (or address)" if self.transport == "packed" else ""))
         if self.host is not None and self.address is not None:
             raise _at("address", "give host/port or address, not both")
+        if self.transport != "focas" and self.paths != 1:
+            raise _at("paths", "only for transport focas (the packed surface reads path 1)")
         if self.transport != "focas" and self.max_subpackets is not None:
             raise _at("max_subpackets", "only for transport focas (the packed surface has no subpackets)")
         return self
@@ -720,6 +722,12 @@ class Config(_Model):
     def _unique_ids(cls, machines: list[MachineConfig]) -> list[MachineConfig]:
         for problem in _duplicate_ids({"machines": [{"id": m.id} for m in machines]}):
             raise ValueError("@" + problem.removeprefix("machines").replace(": ", "@", 1))
+        ids = {m.id.lower(): m.id for m in machines}
+        for machine in machines:
+            for device in machine.path_devices()[1:]:
+                if device.id.lower() in ids:
+                    raise ValueError(f"machine {machine.id!r} polls {machine.paths} paths, so its path {device.path} "
+                                     f"is the device {device.id!r}, already a machine id")
         return machines
 
     @model_validator(mode="after")

@@ -206,6 +206,18 @@ def test_poll_plan_forms() -> None:
     assert poll.diags[0].metric_name("Diag") == "Servo/Error"
 
 
+def test_paths_expand_to_one_device_per_path() -> None:
+    two_paths = MINIMAL + "    paths: 2\n"
+    config = parse(two_paths)
+    assert [(d.id, d.path) for d in config.devices()] == [("m1", 1), ("m1-path2", 2)]
+    assert config.machine("m1-path2").host == "10.0.0.1"
+    clash = problems_of(two_paths + "  - {id: m1-path2, host: 10.0.0.2}\n")
+    assert any("its path 2 is the device 'm1-path2', already a machine id" in p for p in clash), clash
+    packed = problems_of(MINIMAL.replace("    host: 10.0.0.1\n",
+                                         "    transport: packed\n    address: unix:/run/x.sock\n    paths: 2\n"))
+    assert any("paths: only for transport focas" in p for p in packed), packed
+
+
 def test_numbered_reads_for_all_axes() -> None:
     config = parse(_machine_with_poll("""
         params: [{number: 1850, axis: all}]
