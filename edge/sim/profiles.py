@@ -8,7 +8,7 @@ shared/docs/focas-protocol.md (§3.3-§3.5); series/version strings are plausibl
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from edge.focas.model import SysInfo
 
@@ -101,16 +101,9 @@ PROFILES: dict[str, Profile] = {
         response_version=3,
         timer_little_endian=True,
     ),
-    "31i-2p": Profile(
-        name="31i-2p",
-        sysinfo=_sysinfo(0x0202, 32, "31", " T", "G42A", "20.0", 3),
-        axis_names=("X", "Z", "C"),
-        spindle_names=("S1", "S2"),
-        response_version=3,
-        timer_little_endian=True,
-        paths=2,
-    ),
 }
+# A twin-turret lathe: a 31i whose second path runs its own program.
+PROFILES["31i-2p"] = replace(PROFILES["31i"], name="31i-2p", paths=2)
 PROFILE_ALIASES = {"0i": "0i-F", "0if": "0i-F", "16": "16i", "30": "30i", "31": "31i", "31i-b": "31i"}
 
 
