@@ -62,6 +62,8 @@ def summary(config: Config, source: str) -> str:
         counts = (f"{sum(len(m.numbers) for m in poll.macros)} macros, "
                   f"{sum(len(p.addresses()) for p in poll.pmc)} PMC values, {len(poll.params)} params, "
                   f"{len(poll.diags)} diags")
+        paths = f"  {machine.paths} paths (devices {', '.join(d.id for d in machine.path_devices())})" \
+            if machine.paths > 1 else ""
         lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}  tz {machine.timezone}  "
-                     f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}")
+                     f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}{paths}")
     return "\n".join(lines)

@@ -392,6 +392,10 @@ def test_check_config_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     out, err = capsys.readouterr()
     assert "valid" in out and "m1" in out
     assert "warning: alarms.history_depth: 999" in err
+    two_paths = tmp_path / "two-paths.yaml"
+    two_paths.write_text(MINIMAL + "    paths: 2\n")
+    assert main(["check-config", str(two_paths)]) == 0
+    assert "2 paths (devices m1, m1-path2)" in capsys.readouterr().out
     bad = tmp_path / "bad.yaml"
     bad.write_text(MINIMAL.replace("host: 10.0.0.1", "host: 10.0.0.1\n    port: 0\n    timezone: X/Y"))
     assert main(["check-config", str(bad)]) == 2
