@@ -42,6 +42,7 @@ from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.targets import (
+    ALL_AXES,
     MAX_AXIS,
     MAX_MACRO,
     MAX_PARAM,
@@ -267,10 +268,12 @@ class Periods(_Model):
     pmc: Period = 1.0
     params: Period = 60.0
     diags: Period = 60.0
+    loads: Period = 1.0  # servo load per axis
+    counters: Period = 10.0  # timers (power-on, operating, cutting, cycle) and part totals
 
     @property
     def fastest_s(self) -> float:
-        return min(self.status, self.macros, self.pmc, self.params, self.diags)
+        return min(self.status, self.macros, self.pmc, self.params, self.diags, self.loads, self.counters)
 
 
 def _not_before(end: int | None, start: int | None) -> int | None:
@@ -478,17 +481,24 @@ class PmcRange(_Model):
 
 
 class NumberedItem(_Model):
-    """One parameter or diagnosis number for one axis (0 = the whole CNC)."""
+    """One parameter or diagnosis number for one axis (0 = the whole CNC; `all` = every axis in one
+    read, published per axis name)."""
 
     number: int = Field(ge=0, le=MAX_PARAM)
-    axis: int = Field(default=0, ge=0, le=MAX_AXIS)
+    axis: int = Field(default=0, ge=ALL_AXES, le=MAX_AXIS)
     name: MetricName | None = None
     deadband: float = Field(default=0.0, ge=0)
 
     @model_validator(mode="before")
     @classmethod
     def _shorthand(cls, value: object) -> object:
-        return {"number": value} if isinstance(value, int) and not isinstance(value, bool) else value
+        if isinstance(value, int) and not isinstance(value, bool):
+            return {"number": value}
+        if isinstance(value, dict) and isinstance(value.get("axis"), str):
+            if value["axis"].strip().lower() != "all":
+                raise ValueError(f"axis must be 0..{MAX_AXIS} or 'all', got {value['axis']!r}")
+            return {**value, "axis": ALL_AXES}
+        return value
 
     @model_validator(mode="after")
     def _folder(self) -> NumberedItem:
@@ -499,13 +509,21 @@ class NumberedItem(_Model):
     def metric_name(self, folder: str) -> str:
         if self.name is not None:
             return self.name
-        return f"{folder}/{self.number}" + (f"/{self.axis}" if self.axis else "")
+        return f"{folder}/{self.number}" + (f"/{self.axis}" if self.axis > 0 else "")
+
+
+MAX_TOOL_OFFSETS = 400
 
 
 class PollPlan(_Model):
     periods: Periods = Field(default_factory=Periods)
     positions: list[PositionKind] = Field(default_factory=lambda: [DEFAULT_POSITION])
     part_count: bool = True
+    program_name: bool = True  # Program/Name and Program/MainPath (0xcf, 0xb9)
+    servo_load: bool = True  # Axis/<name>/Load (0x56), loads period
+    timers: bool = True  # Times/PowerOn, Operating, Cutting, Cycle (0x120), counters period
+    operator_messages: bool = True  # Message/Operator (0x34), status group
+    tool_offsets: int = Field(default=0, ge=0, le=MAX_TOOL_OFFSETS)  # offsets 1..n of each kind (0x08), counters
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
@@ -544,8 +562,13 @@ class PollPlan(_Model):
             yield f"params[{i}]", param.metric_name("Param")
         for i, diag in enumerate(self.diags):
             yield f"diags[{i}]", diag.metric_name("Diag")
+        for n in range(1, self.tool_offsets + 1):
+            for folder in ("LengthGeometry", "LengthWear", "RadiusGeometry", "RadiusWear"):
+                yield "tool_offsets", f"Tool/{n}/{folder}"
         if self.part_count:
             yield "part_count", "Counters/Parts"
+            yield "part_count", "Counters/PartsTotal"
+            yield "part_count", "Counters/PartsRequired"
 
 
 # ---- alarms, writes, machines ---------------------------------------------------------------------------
@@ -634,6 +657,9 @@ class Timeouts(_Model):
 _PACKED_ADDRESS_RE = re.compile(r"tcp:[^:\s]+:\d{1,5}|unix:/\S+", re.ASCII)
 
 
+MAX_PATHS = 10  # the most paths a 30i-B series control offers
+
+
 class MachineConfig(_Model):
     id: SparkplugId
     host: str | None = None
@@ -652,6 +678,16 @@ class MachineConfig(_Model):
     poll: PollPlan = Field(default_factory=PollPlan)
     alarms: AlarmsConfig | None = None
     writes: MachineWrites | None = None
+    # CNC paths to poll (a twin-turret lathe has 2): path 1 is this machine's device, path n the device
+    # `<id>-path<n>` (see path_devices). `path` is the one this entry's session reads.
+    paths: int = Field(default=1, ge=1, le=MAX_PATHS)
+    path: int = Field(default=1, ge=1, le=MAX_PATHS)
+
+    def path_devices(self) -> list[MachineConfig]:
+        """This machine, then one entry per further path: same settings, id `<id>-path<n>`, path n."""
+        others = [self.model_copy(update={"id": f"{self.id}-path{n}", "path": n, "paths": 1})
+                  for n in range(2, self.paths + 1)]
+        return [self, *others]
 
     @field_validator("timezone")
     @classmethod
@@ -673,7 +709,7 @@ class MachineConfig(_Model):
     @model_validator(mode="after")
     def _endpoint(self) -> MachineConfig:
         for key, message in _endpoint_rules(self.transport, self.host, self.address, self.max_subpackets,
-                                            self.fwlib_host):
+                                            self.fwlib_host, self.paths):
             raise _at(key, message)
         return self
 
@@ -724,6 +760,12 @@ class Config(_Model):
     def _unique_ids(cls, machines: list[MachineConfig]) -> list[MachineConfig]:
         for problem in _duplicate_ids({"machines": [{"id": m.id} for m in machines]}):
             raise ValueError("@" + problem.removeprefix("machines").replace(": ", "@", 1))
+        ids = {m.id.lower(): m.id for m in machines}
+        for machine in machines:
+            for device in machine.path_devices()[1:]:
+                if device.id.lower() in ids:
+                    raise ValueError(f"machine {machine.id!r} polls {machine.paths} paths, so its path {device.path} "
+                                     f"is the device {device.id!r}, already a machine id")
         return machines
 
     @model_validator(mode="after")
@@ -758,8 +800,12 @@ class Config(_Model):
         """state_dir from the file, else $STATE_DIRECTORY (systemd), else /var/lib/focas-edge."""
         return self.state_dir if self.state_dir is not None else self._state_dir
 
+    def devices(self) -> list[MachineConfig]:
+        """Every polled device: each machine, and for a multi-path machine one entry per further path."""
+        return [device for machine in self.machines for device in machine.path_devices()]
+
     def machine(self, machine_id: str) -> MachineConfig:
-        for machine in self.machines:
+        for machine in self.devices():
             if machine.id == machine_id:
                 return machine
         raise KeyError(machine_id)
@@ -986,7 +1032,7 @@ def _mqtt_cross_checks(data: dict[str, Any]) -> Iterator[str]:
 
 
 def _endpoint_rules(transport: object, host: object, address: object,
-                    max_subpackets: object, fwlib_host: object) -> list[tuple[str, str]]:
+                    max_subpackets: object, fwlib_host: object, paths: object = 1) -> list[tuple[str, str]]:
     """Rules between a machine's endpoint keys as (key, message), for the model and the raw re-check."""
     rules = []
     if transport == "focas" and address is not None:
@@ -998,6 +1044,8 @@ def _endpoint_rules(transport: object, host: object, address: object,
     if transport != "focas" and fwlib_host is not None:
         rules.append(("fwlib_host", "only beside the native transport (focas); with transport packed, address "
                                     "already names the library host"))
+    if transport != "focas" and paths not in (1, None):
+        rules.append(("paths", "only for transport focas (the packed surface reads path 1)"))
     if transport != "focas" and max_subpackets is not None:
         rules.append(("max_subpackets", "only for transport focas (the packed surface has no subpackets)"))
     return rules
@@ -1010,7 +1058,7 @@ def _machine_cross_checks(data: dict[str, Any]) -> Iterator[str]:
         if isinstance(machine, dict):
             for key, message in _endpoint_rules(machine.get("transport", "focas"), machine.get("host"),
                                                 machine.get("address"), machine.get("max_subpackets"),
-                                                machine.get("fwlib_host")):
+                                                machine.get("fwlib_host"), machine.get("paths", 1)):
                 yield f"machines[{index}].{key}: {message}"
 
 

@@ -97,7 +97,7 @@ class Daemon:
         await self._start_status_http()
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
-        for machine in self.config.machines:
+        for machine in self.config.devices():
             self._start_machine(machine)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
@@ -203,8 +203,8 @@ class Daemon:
         if step != self.tick_grid.step_s:
             log.info("reload: poll grid %gs -> %gs", self.tick_grid.step_s, step)
             self.tick_grid.step_s = step  # before any new machine sleeps on it
-        old = {m.id: m for m in self.config.machines}
-        fresh = {m.id: m for m in new.machines}
+        old = {m.id: m for m in self.config.devices()}
+        fresh = {m.id: m for m in new.devices()}
         changed = [i for i in old if i in fresh and (old[i] != fresh[i] or
                                                      self.config.alarms_for(old[i]) != new.alarms_for(fresh[i]))]
         removed = [i for i in old if i not in fresh]

@@ -1,7 +1,8 @@
 """`make run`: a simulated fleet, a broker, the daemon and a live decoded view, in one process.
 
 The fleet follows the example config (one simulated CNC per configured machine, profiles 30i / 16i /
-0i-F in turn, the first one running a program with alarms coming and going). If no broker answers at
+0i-F in turn, a machine with `paths: 2` the two-path lathe 31i-2p, the first one running a program with
+alarms coming and going). If no broker answers at
 the configured address, an embedded broker (amqtt) is started there and the demo says so. Ctrl-C stops
 everything cleanly: DDEATHs, NDEATH, close PDUs, broker, simulators.
 """
@@ -28,6 +29,7 @@ from edge.watch import Watcher
 log = logging.getLogger("edge.demo")
 
 PROFILES = ("30i", "16i", "0i-F")
+MULTI_PATH_PROFILE = "31i-2p"  # for a machine configured with paths: 2 (a twin-turret lathe)
 
 
 def broker_answers(host: str, port: int) -> bool:
@@ -53,7 +55,8 @@ def fleet_specs(config: Config) -> list[MachineSpec]:
     for index, machine in enumerate(config.machines):
         cycle = CycleSpec(alarm_every=2, alarm_seconds=6.0) if index == 0 else CycleSpec(
             cut_seconds=9.0 + 3 * index, idle_seconds=3.0 + index)
-        specs.append(MachineSpec(name=machine.id, profile=PROFILES[index % len(PROFILES)],
+        profile = MULTI_PATH_PROFILE if machine.paths > 1 else PROFILES[index % len(PROFILES)]
+        specs.append(MachineSpec(name=machine.id, profile=profile,
                                  timezone=machine.timezone, cycle=cycle, param_write_enabled=False))
     return specs
 
@@ -100,7 +103,8 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
             config = config.model_copy(update={"mqtt": mqtt})
     for machine, sim in zip(config.machines, fleet, strict=True):
         where = machine.endpoint + (f" + library host {machine.fwlib_host}" if machine.fwlib_host else "")
-        print(f"== simulated CNC {machine.id:<10} profile {sim.state.profile.name:<5} at {where}", flush=True)
+        paths = f"  {machine.paths} paths" if machine.paths > 1 else ""
+        print(f"== simulated CNC {machine.id:<10} profile {sim.state.profile.name:<5} at {where}{paths}", flush=True)
     prefix = mqtt.json_topics.prefix
     group = mqtt.sparkplug.group_id if mqtt.sparkplug else "+"
     print(f"== subscribe: mosquitto_sub -h {mqtt.host} -p {port} -t 'spBv1.0/{group}/#' -t '{prefix}/#' -v",

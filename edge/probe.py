@@ -21,6 +21,7 @@ from typing import Any
 from edge.focas import items as it
 from edge.focas.errors import EW_FUNC, EW_NOOPT, CncError, FocasError, NotSupported
 from edge.focas.model import ParamRecord, PmcType, SysInfo
+from edge.focas.paths import path_count
 from edge.focas.routed import LIBRARY, NATIVE
 from edge.focas.session import CncSession
 
@@ -81,6 +82,7 @@ class ProbeReport:
     steps: list[ProbeStep] = field(default_factory=list)
     writes: list[WriteCheck] = field(default_factory=list)
     error: str = ""  # set when the probe could not finish (connection refused, lost, timed out)
+    paths: int = 1  # CNC paths answering (edge.focas.paths)
 
     @property
     def model(self) -> str:
@@ -118,6 +120,9 @@ def probe_items() -> list[it.ReadItem]:
         it.ReadMacros(*PROBE_MACROS), it.ReadPmc(*PROBE_PMC, PmcType.BYTE), it.ReadClock(),
     ]
     items += [it.ReadTimer(kind) for kind in range(5)]
+    items += [it.ReadToolOffsets(kind, 1, 1) for kind in range(len(it.TOOL_OFFSET_KINDS))]
+    items.append(it.ReadOperatorMessages())
+    items.append(it.ReadPathStatus(2))
     items.append(it.ReadAlarmHistory(PROBE_ALARM_HISTORY_DEPTH))
     return items
 
@@ -133,6 +138,10 @@ def describe_arguments(item: it.ReadItem) -> str:
             return f"{area}{start}..{area}{end} {data_type.name.lower()}"
         case it.ReadPositions(kind=kind):
             return kind
+        case it.ReadToolOffsets(kind=kind, first=first, count=count):
+            return f"{it.TOOL_OFFSET_KINDS[kind]} {first}..{first + count - 1}"
+        case it.ReadPathStatus(path=path):
+            return f"path {path}"
         case it.ReadTimer(kind=kind):
             return f"kind {kind}"
         case it.ReadControlledAxes(what=what):
@@ -256,6 +265,7 @@ async def probe(cnc: CncSession, address: str) -> ProbeReport:
     report.connect_ms = round((time.perf_counter() - started) * 1000, 2)
     items = probe_items()
     try:
+        report.paths = await path_count(cnc)
         for item in items:
             report.steps.append(await _try(cnc, item))
         record_reads = [i for i in items if isinstance(i, it.ReadParams | it.ReadDiag)]
@@ -283,6 +293,7 @@ def report_json(report: ProbeReport) -> dict[str, Any]:
             "model": info.model_name, "cnc_type": info.cnc_type.strip(), "mt_type": info.mt_type.strip(),
             "series": info.series, "version": info.version, "max_axis": info.max_axis,
             "axes": info.axes, "record_form": "8-byte (0x8d/0x93)" if info.is_30i_style else "4-byte (0x0e/0x30)",
+            "paths": report.paths,
         },
         "functions": [
             {"function": s.function, "arguments": s.arguments, "command": s.command or None,
@@ -305,7 +316,7 @@ def report_lines(report: ProbeReport) -> list[str]:
     if info is not None:
         form = "8-byte records (0x8d/0x93)" if info.is_30i_style else "4-byte records (0x0e/0x30)"
         lines.append(f"  model {info.model_name}  series {info.series}  version {info.version}  "
-                     f"max_axis {info.max_axis}  axes {info.axes}  {form}")
+                     f"max_axis {info.max_axis}  axes {info.axes}  {form}  paths {report.paths}")
         lines.append(f"  connect {report.connect_ms:.1f} ms")
     if report.steps:
         lines.append("")

@@ -6,8 +6,9 @@ in the config, so the three can never disagree about what `pmc:R100.3` means:
     macro:500            macro:500-505
     pmc:R100             pmc:R100-R103          pmc:R100.3 (bit 3)       pmc:D2204.word   pmc:D2204-D2207.word
     param:6711           param:1815/1 (axis 1)  param:1815/0.3 (axis 0, bit 3)          param:6711.2
-    diag:980             diag:980-981/1
-    sysinfo  status  alarms  program  positions  clock      (read-only names, whole-CNC reads)
+    param:1850/all (every axis, read-only)      diag:980             diag:980-981/1        diag:308-309/all
+    sysinfo status alarms program programs positions axes spindles speeds loads timers messages tool_offsets clock
+                                                            (read-only names, whole-CNC reads)
 
 PMC addresses are byte addresses and ranges are inclusive, as pmc_rdpmcrng counts them: a typed range
 `D2204-D2207.word` is two words (bytes 2204..2207), so its length must be a whole number of elements;
@@ -32,7 +33,9 @@ MAX_MACRO = 99_999
 MAX_PMC_ADDRESS = 65_535
 MAX_PARAM = 65_535
 MAX_AXIS = 32
-READ_NAMES = ("sysinfo", "status", "alarms", "program", "positions", "clock")
+# The named reads of `focas-edge read` (edge/cli/named_reads.py says what each reads).
+READ_NAMES = ("sysinfo", "status", "alarms", "program", "programs", "positions", "axes", "spindles", "speeds",
+              "loads", "timers", "messages", "tool_offsets", "clock")
 PMC_TYPE_NAMES: dict[str, PmcType] = {
     "byte": PmcType.BYTE,
     "word": PmcType.WORD,
@@ -85,7 +88,7 @@ class PmcTarget:
 
 @dataclass(frozen=True, slots=True)
 class ParamTarget:
-    """CNC parameters first..last for one axis (0 = the whole CNC), or one bit of one parameter."""
+    """CNC parameters first..last for one axis (0 = the whole CNC, -1 = every axis), or one bit of one."""
 
     first: int
     last: int
@@ -98,7 +101,7 @@ class ParamTarget:
 
 @dataclass(frozen=True, slots=True)
 class DiagTarget:
-    """Diagnosis numbers first..last for one axis (0 = the whole CNC); read-only."""
+    """Diagnosis numbers first..last for one axis (0 = the whole CNC, -1 = every axis); read-only."""
 
     first: int
     last: int
@@ -124,7 +127,8 @@ WritableTarget = MacroTarget | PmcTarget | ParamTarget
 _INT = r"(\d{1,9})"
 _MACRO_RE = re.compile(rf"{_INT}(?:-{_INT})?", re.ASCII)
 _PMC_RE = re.compile(rf"([A-Za-z]){_INT}(?:-([A-Za-z])?{_INT})?(?:\.(\w+))?", re.ASCII)
-_NUMBERED_RE = re.compile(rf"{_INT}(?:-{_INT})?(?:/{_INT})?(?:\.{_INT})?", re.ASCII)
+_NUMBERED_RE = re.compile(rf"{_INT}(?:-{_INT})?(?:/(\d{{1,9}}|all))?(?:\.{_INT})?", re.ASCII | re.IGNORECASE)
+ALL_AXES = -1  # `/all`: every axis at once (the FOCAS axis argument -1)
 
 
 def parse_target(text: str) -> Target:
@@ -151,6 +155,8 @@ def parse_writable(text: str) -> WritableTarget:
     target = parse_target(text)
     if isinstance(target, DiagTarget | NamedTarget):
         raise TargetError(f"{text!r}: {target} is read-only; writable kinds are macro, pmc and param")
+    if isinstance(target, ParamTarget) and target.axis == ALL_AXES:
+        raise TargetError(f"{text!r}: a parameter write names one axis (/1, /2 ...), not /all")
     return target
 
 
@@ -241,7 +247,7 @@ def _parse_numbered(text: str, rest: str, kind: str) -> tuple[int, int, int, int
     first = int(match[1])
     last = int(match[2]) if match[2] else first
     _check_span(text, kind, first, last, MAX_PARAM)
-    axis = int(match[3]) if match[3] else 0
+    axis = (ALL_AXES if match[3].lower() == "all" else int(match[3])) if match[3] else 0
     if axis > MAX_AXIS:
         raise TargetError(f"{text!r}: axis {axis} is not 0..{MAX_AXIS} (0 = whole CNC)")
     bit = int(match[4]) if match[4] else None
@@ -264,7 +270,7 @@ def _span(first: int, last: int) -> str:
 def _numbered_suffix(first: int, last: int, axis: int, bit: int | None) -> str:
     text = _span(first, last)
     if axis:
-        text += f"/{axis}"
+        text += "/all" if axis == ALL_AXES else f"/{axis}"
     if bit is not None:
         text += f"{'' if axis else '/0'}.{bit}"
     return text

@@ -63,6 +63,8 @@ def summary(config: Config, source: str) -> str:
                   f"{sum(len(p.addresses()) for p in poll.pmc)} PMC values, {len(poll.params)} params, "
                   f"{len(poll.diags)} diags")
         routed = f" + fwlib_host {machine.fwlib_host}" if machine.fwlib_host else ""
+        paths = f"  {machine.paths} paths (devices {', '.join(d.id for d in machine.path_devices())})" \
+            if machine.paths > 1 else ""
         lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}{routed}  tz {machine.timezone}  "
-                     f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}")
+                     f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}{paths}")
     return "\n".join(lines)

@@ -12,16 +12,19 @@ import asyncio
 import json
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass, replace
 from datetime import datetime
 from typing import Any, TypeVar
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli.named_reads import NAMED_READS, Shaper
+from edge.collect.axis_numbers import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
 from edge.focas.model import ParamRecord
 from edge.targets import (
+    ALL_AXES,
     DiagTarget,
     MacroTarget,
     NamedTarget,
@@ -48,13 +51,22 @@ def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
                         help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
                         help=f"connect and request timeout (default {DEFAULT_TIMEOUT:g})")
+    parser.add_argument("--path", type=int, default=1, metavar="N",
+                        help="CNC path to read or write (a twin-turret lathe has 2; default 1)")
 
 
 def open_cnc(args: argparse.Namespace) -> Any:
     """An unconnected session for the CLI's address/transport/timeout; ConfigError on a bad address."""
     from edge.focas.connect import open_session
 
-    return open_session(args.transport, args.address, timeout=args.timeout, connect_timeout=args.timeout)
+    path = getattr(args, "path", 1)
+    if path < 1:
+        raise ConfigError([f"--path {path}: paths are numbered from 1"])
+    if path != 1 and args.transport != "focas":
+        raise ConfigError([f"--path {path}: the {args.transport} transport reads path 1 only"])
+    extra: dict[str, Any] = {"path": path} if path != 1 else {}
+    return open_session(args.transport, args.address, timeout=args.timeout, connect_timeout=args.timeout,
+                        **extra)
 
 
 def describe_error(exc: BaseException) -> str:
@@ -88,28 +100,37 @@ def json_value(value: object) -> object:
 
 # ---- target -> reads -> value ----------------------------------------------------------------------
 
-Shaper = Callable[[list[Any]], object]
-
 
 @dataclass(frozen=True, slots=True)
 class ReadPlan:
-    """The read items one CLI item needs and how their results become the printed value."""
+    """The read items one CLI item needs and how their results become the printed value.
+
+    `parts` names items that may fail alone (a composite such as positions degrades per kind): the shaper
+    gets None for a failed part, and the item fails only when every part failed."""
 
     text: str
     items: tuple[it.ReadItem, ...]
     shape: Shaper
+    parts: dict[int, str] = field(default_factory=dict)
+    per_axis: ReadPlan | None = None  # an axis-0 number refused as axis-type is read this way instead
 
 
 def plan_read(text: str) -> ReadPlan:
     """Raises TargetError for a string that is not a readable target."""
     target = parse_target(text)
+    if isinstance(target, NamedTarget):
+        named = NAMED_READS[target.name]
+        return ReadPlan(text, named.items, named.shape, named.parts)
     items, shape = _reads_for(target)
-    return ReadPlan(text, tuple(items), shape)
+    per_axis = None
+    if isinstance(target, ParamTarget | DiagTarget) and target.axis == 0:
+        per_axis_items, per_axis_shape = _reads_for(replace(target, axis=ALL_AXES))
+        per_axis = ReadPlan(text, tuple(per_axis_items), per_axis_shape)
+    return ReadPlan(text, tuple(items), shape, per_axis=per_axis)
 
 
 def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
-    if isinstance(target, NamedTarget):
-        return _NAMED[target.name]
+    assert not isinstance(target, NamedTarget)
     if isinstance(target, MacroTarget):
         return [it.ReadMacros(target.first, target.last)], \
             lambda r: _by_number(range(target.first, target.last + 1), r[0], "#")
@@ -121,10 +142,13 @@ def _reads_for(target: Target) -> tuple[list[it.ReadItem], Shaper]:
         addresses = range(target.start, target.end + 1, target.data_type.width)
         return [item], lambda r: _by_number(addresses, r[0], target.area)
     if isinstance(target, ParamTarget):
-        read = it.ReadParams(target.first, target.last, target.axis)
-        return [read], lambda r: _records(r[0], target.bit)
-    assert isinstance(target, DiagTarget)
-    return [it.ReadDiag(target.first, target.last, target.axis)], lambda r: _records(r[0], None)
+        read: it.ReadParams | it.ReadDiag = it.ReadParams(target.first, target.last, target.axis)
+        param_bit = target.bit
+    else:
+        read, param_bit = it.ReadDiag(target.first, target.last, target.axis), None
+    if target.axis == ALL_AXES:  # one value per controlled axis, by axis name
+        return [read, it.ReadAxisNames()], lambda r: _records(r[0], param_bit, r[1])
+    return [read], lambda r: _records(r[0], param_bit)
 
 
 def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) -> object:
@@ -133,12 +157,14 @@ def _by_number(numbers: Sequence[int], values: Sequence[object], prefix: str) ->
     return {f"{prefix}{n}": v for n, v in zip(numbers, values, strict=False)}
 
 
-def _records(records: Sequence[ParamRecord], bit: int | None) -> object:
+def _records(records: Sequence[ParamRecord], bit: int | None, axis_names: Sequence[str] = ()) -> object:
     def pick(value: object) -> object:
         return (value >> bit) & 1 if bit is not None and isinstance(value, int) else value
 
     def one(record: ParamRecord) -> object:
-        if len(record.values) > 1 and record.axis == -1:  # a per-axis parameter read for every axis
+        if record.axis == ALL_AXES and axis_names:  # the controlled axes' slots, by name
+            return {name: pick(v) for name, v in zip(axis_names, record.values, strict=False)}
+        if len(record.values) > 1 and record.axis == ALL_AXES:  # a per-axis parameter read for every axis
             return [pick(v) for v in record.values]
         return pick(record.value)
 
@@ -147,55 +173,55 @@ def _records(records: Sequence[ParamRecord], bit: int | None) -> object:
     return {str(r.number): one(r) for r in records}
 
 
-def _positions(results: list[Any]) -> object:
-    names, *kinds = results
-    table: dict[str, dict[str, object]] = {}
-    for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
-        for name, value in zip(names, values, strict=False):
-            table.setdefault(str(name), {})[kind] = value
-    return table
-
-
-_NAMED: dict[str, tuple[list[it.ReadItem], Shaper]] = {
-    "sysinfo": ([it.ReadSysInfo()], lambda r: r[0]),
-    "status": ([it.ReadStatus()], lambda r: r[0]),
-    "alarms": ([it.ReadAlarmStatus(), it.ReadActiveAlarms(32)],
-               lambda r: {"status": r[0], "active": r[1]}),
-    "program": ([it.ReadProgramNumber(), it.ReadSequenceNumber()],
-                lambda r: {"running": r[0].running, "main": r[0].main, "sequence": r[1]}),
-    "positions": ([it.ReadAxisNames(), *(it.ReadPositions(kind) for kind in it.POSITION_KINDS)], _positions),
-    "clock": ([it.ReadClock()], lambda r: r[0]),
-}
-
-
 @dataclass(frozen=True, slots=True)
 class ItemOutcome:
     item: str
     value: object = None
     error: BaseException | None = None
+    part_errors: tuple[tuple[str, BaseException], ...] = ()
+
+
+def _outcome(plan: ReadPlan, results: list[Any]) -> ItemOutcome:
+    """One CLI item from its results: failed parts are left out; any other failure fails the item."""
+    failed_parts = tuple((plan.parts[i], r) for i, r in enumerate(results)
+                         if i in plan.parts and isinstance(r, BaseException))
+    required = [r for i, r in enumerate(results) if i not in plan.parts]
+    failed = next((r for r in required if isinstance(r, BaseException)), None)
+    if failed is None and plan.parts and len(failed_parts) == len(plan.parts):
+        failed = failed_parts[0][1]
+    if failed is not None:
+        return ItemOutcome(plan.text, error=failed)
+    shaped = [None if i in plan.parts and isinstance(r, BaseException) else r for i, r in enumerate(results)]
+    try:
+        return ItemOutcome(plan.text, plan.shape(shaped), part_errors=failed_parts)
+    except (IndexError, TypeError, ValueError, AttributeError) as exc:
+        return ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}"))
 
 
 async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
     """Connect, read every plan's items in ONE batch, shape the results per CLI item."""
-    flat = [item for plan in plans for item in plan.items]
     try:
         async with session as cnc:
-            results = await cnc.batch(flat)
+            outcomes = await _read_batch(cnc, plans)
+            retry = [(i, plan.per_axis) for i, (plan, outcome) in enumerate(zip(plans, outcomes, strict=True))
+                     if plan.per_axis is not None and refused_as_axis_type(outcome.error)]
+            if retry:  # axis-type numbers asked with axis 0: read them for every axis
+                again = await _read_batch(cnc, [p for _, p in retry if p is not None])
+                for (index, _), outcome in zip(retry, again, strict=True):
+                    outcomes[index] = outcome
     except FocasError as exc:
         return [ItemOutcome(plan.text, error=exc) for plan in plans]
+    return outcomes
+
+
+async def _read_batch(cnc: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
+    results = await cnc.batch([item for plan in plans for item in plan.items])
     outcomes = []
     position = 0
     for plan in plans:
         mine = results[position : position + len(plan.items)]
         position += len(plan.items)
-        failed = next((r for r in mine if isinstance(r, BaseException)), None)
-        if failed is not None:
-            outcomes.append(ItemOutcome(plan.text, error=failed))
-            continue
-        try:
-            outcomes.append(ItemOutcome(plan.text, plan.shape(mine)))
-        except (IndexError, TypeError, ValueError, AttributeError) as exc:
-            outcomes.append(ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}")))
+        outcomes.append(_outcome(plan, mine))
     return outcomes
 
 
@@ -242,8 +268,9 @@ def _flatten(value: object, prefix: str = "") -> list[tuple[str, str]]:
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "read", help="read items from one CNC",
-        description="Read items from one CNC in one batched request. Items: sysinfo status alarms program "
-                    "positions clock macro:500-505 param:6711 param:1815/1 param:1815/0.3 diag:980-981/1 "
+        description="Read items from one CNC in one batched request. Items: "
+                    f"{' '.join(NAMED_READS)} macro:500-505 param:6711 param:1815/1 param:1815/0.3 param:1850/all "
+                    "diag:980-981/1 diag:308-309/all "
                     "pmc:D2204.word pmc:R100-R103 pmc:R100.3",
         epilog="Exit codes: 0 every item read, 1 an item or the connection failed, 2 bad usage.")
     add_connection_arguments(parser)
@@ -272,6 +299,9 @@ def run(args: argparse.Namespace) -> int:
     plans, session = prepared
     outcomes = asyncio.run(read_all(session, plans))
     (print_json if args.json else print_table)(outcomes)
+    for outcome in outcomes:
+        for part, error in outcome.part_errors:
+            print(f"focas-edge read: {outcome.item}: {part}: {describe_error(error)} (left out)", file=sys.stderr)
     failed = [o for o in outcomes if o.error is not None]
     for outcome in failed:
         assert outcome.error is not None

@@ -24,6 +24,7 @@ from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
 from edge.samples import MetricSpec, MetricType
 
 PART_COUNT_PARAM = 6711
+ALL_AXES = -1  # the FOCAS axis argument reading every axis at once
 
 
 class Group(enum.Enum):
@@ -36,6 +37,8 @@ class Group(enum.Enum):
     PMC = "pmc"
     PARAMS = "params"
     DIAGS = "diags"
+    LOADS = "loads"
+    COUNTERS = "counters"
     ALARM_HISTORY = "alarm_history"
 
     # Identity hash, in C (Enum's is Python code): the schedule hashes groups on every tick.
@@ -91,6 +94,19 @@ ALARM_EVENT = MetricSpec("Alarm/Event", MetricType.STRING, description="JSON rai
 ALARM_HISTORY = MetricSpec("Alarm/History", MetricType.STRING, description="JSON alarm history entry")
 ALARM_STATUS = MetricSpec("Alarm/Status", MetricType.UINT32, description="alarm status bits")
 PART_COUNT = MetricSpec("Counters/Parts", MetricType.INT64, description="parameter 6711")
+PART_TOTAL_PARAM = 6712
+PART_REQUIRED_PARAM = 6713
+PART_TOTAL = MetricSpec("Counters/PartsTotal", MetricType.INT64, description="parameter 6712")
+PART_REQUIRED = MetricSpec("Counters/PartsRequired", MetricType.INT64, description="parameter 6713")
+PROGRAM_NAME = MetricSpec("Program/Name", MetricType.STRING, description="running program (cnc_exeprgname)")
+PROGRAM_MAIN_PATH = MetricSpec("Program/MainPath", MetricType.STRING, description="main program (cnc_pdf_rdmain)")
+# cnc_rdtimer types 0..3 (4, the free-purpose timer, is not a plant figure).
+TIMER_FOLDERS = ("PowerOn", "Operating", "Cutting", "Cycle")
+OPERATOR_MESSAGE = MetricSpec("Message/Operator", MetricType.STRING,
+                              description="JSON list of operator messages (cnc_rdopmsg)")
+TOOL_OFFSET_FOLDERS = ("LengthGeometry", "LengthWear", "RadiusGeometry", "RadiusWear")  # 0x08 type 0..3
+TIMER_METRICS = tuple(MetricSpec(f"Times/{name}", MetricType.DOUBLE, "s", description=f"cnc_rdtimer type {kind}")
+                      for kind, name in enumerate(TIMER_FOLDERS))
 AXIS_NAMES = MetricSpec("Device/AxisNames", MetricType.STRING)
 SPINDLE_NAMES = MetricSpec("Device/SpindleNames", MetricType.STRING)
 
@@ -109,6 +125,8 @@ class StaticInfo:
     sysinfo: SysInfo | None = None
     axis_names: tuple[str, ...] = ()
     spindle_names: tuple[str, ...] = ()
+    # Configured axis-0 numbers the control answered as axis-type ("Param", 1850): read for every axis.
+    per_axis: frozenset[tuple[str, int]] = frozenset()
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,16 +156,18 @@ class MachinePlan:
         static = static or StaticInfo()
         poll = machine.poll
         reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
+        reads += _program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
         reads += _macro_reads(machine)
         reads += _pmc_reads(machine)
-        reads += _numbered_reads(machine)
+        reads += _numbered_reads(machine, static)
         if alarms.mode == "ActivePlusHistory":
             reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(alarms.history_depth),
                                      (ALARM_HISTORY,)))
         periods = {Group.STATUS: poll.periods.status, Group.ACTIVE_ALARMS: poll.periods.status,
                    Group.MACROS: poll.periods.macros, Group.PMC: poll.periods.pmc,
                    Group.PARAMS: poll.periods.params, Group.DIAGS: poll.periods.diags,
+                   Group.LOADS: poll.periods.loads, Group.COUNTERS: poll.periods.counters,
                    Group.ALARM_HISTORY: alarms.history_interval}
         return cls(tuple(reads), periods)
 
@@ -156,9 +176,10 @@ class MachinePlan:
         wanted = set(groups)
         return [read for read in self.reads if read.group in wanted]
 
-    def without(self, operation: str) -> MachinePlan:
-        """The plan minus every read of one operation (a function this control answers EW_FUNC to)."""
-        return MachinePlan(tuple(r for r in self.reads if r.item.operation != operation), self.periods)
+    def without(self, key: str) -> MachinePlan:
+        """The plan minus the reads of one drop key or operation (a function this control refuses)."""
+        return MachinePlan(tuple(r for r in self.reads if key not in (r.item.operation, drop_key(r.item))),
+                           self.periods)
 
     def metrics(self) -> list[MetricSpec]:
         """Every metric this machine can publish (for its DBIRTH), names unique."""
@@ -176,6 +197,17 @@ class MachinePlan:
         for read in self.reads:
             bands.update(read.deadband_map())
         return bands
+
+
+def drop_key(item: it.ReadItem) -> str:
+    """What a refused read is dropped by: its operation, or for one part of a family answered per part
+    (a position kind, a timer kind) operation:part, so a control refusing one kind keeps the others."""
+    match item:
+        case it.ReadPositions(kind=kind):
+            return f"{item.operation}:{kind}"
+        case it.ReadTimer(kind=kind) | it.ReadToolOffsets(kind=kind):
+            return f"{item.operation}:{kind}"
+    return item.operation
 
 
 def _static_reads() -> list[PlannedRead]:
@@ -211,6 +243,39 @@ def _status_reads(positions: Sequence[str], part_count: bool, static: StaticInfo
     return reads
 
 
+def _program_reads(machine: MachineConfig) -> list[PlannedRead]:
+    reads = []
+    if machine.poll.program_name:
+        reads += [PlannedRead(Group.STATUS, it.ReadExecProgramName(), (PROGRAM_NAME,)),
+                  PlannedRead(Group.STATUS, it.ReadMainProgramPath(), (PROGRAM_MAIN_PATH,))]
+    if machine.poll.operator_messages:
+        reads.append(PlannedRead(Group.STATUS, it.ReadOperatorMessages(), (OPERATOR_MESSAGE,)))
+    return reads
+
+
+def _load_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+    if not machine.poll.servo_load or not static.axis_names:
+        return []
+    specs = tuple(MetricSpec(f"Axis/{axis}/Load", MetricType.DOUBLE, "%", description="servo load meter")
+                  for axis in static.axis_names)
+    return [PlannedRead(Group.LOADS, it.ReadServoMeter(), specs)]
+
+
+def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
+    poll = machine.poll
+    reads = []
+    if poll.timers:
+        reads += [PlannedRead(Group.COUNTERS, it.ReadTimer(kind), (spec,)) for kind, spec in enumerate(TIMER_METRICS)]
+    count = poll.tool_offsets
+    for kind, folder in enumerate(TOOL_OFFSET_FOLDERS) if count else ():
+        specs = tuple(MetricSpec(f"Tool/{n}/{folder}", MetricType.DOUBLE) for n in range(1, count + 1))
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadToolOffsets(kind, 1, count), specs))
+    if poll.part_count:
+        reads += [PlannedRead(Group.COUNTERS, it.ReadParams(number, number), (spec,))
+                  for number, spec in ((PART_TOTAL_PARAM, PART_TOTAL), (PART_REQUIRED_PARAM, PART_REQUIRED))]
+    return reads
+
+
 def axis_unit(axis_name: str) -> str:
     """Engineering unit of an axis position: degrees for rotary A/B/C, millimetres otherwise."""
     return "deg" if axis_name[:1].upper() in ROTARY_AXES else "mm"
@@ -237,16 +302,23 @@ def _pmc_reads(machine: MachineConfig) -> list[PlannedRead]:
     return reads
 
 
-def _numbered_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _numbered_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+    """Parameters and diagnoses; an all-axes one (`axis: all`, or an axis-0 number the control answered
+    as axis-type) is one read publishing `<name>/<axis name>` per controlled axis."""
     reads = []
-    for param in machine.poll.params:
-        spec = MetricSpec(param.metric_name("Param"), MetricType.DOUBLE, writable=True)
-        reads.append(PlannedRead(Group.PARAMS, it.ReadParams(param.number, param.number, param.axis), (spec,),
-                                 (param.deadband,)))
-    for diag in machine.poll.diags:
-        spec = MetricSpec(diag.metric_name("Diag"), MetricType.DOUBLE)
-        reads.append(PlannedRead(Group.DIAGS, it.ReadDiag(diag.number, diag.number, diag.axis), (spec,),
-                                 (diag.deadband,)))
+    kinds = (("Param", Group.PARAMS, it.ReadParams, machine.poll.params, True),
+             ("Diag", Group.DIAGS, it.ReadDiag, machine.poll.diags, False))
+    for folder, group, make, entries, writable in kinds:
+        for entry in entries:
+            name = entry.metric_name(folder)
+            axis = entry.axis
+            if axis == 0 and (folder, entry.number) in static.per_axis:
+                axis = ALL_AXES
+            per_axis = axis == ALL_AXES
+            names = [f"{name}/{axis_name}" for axis_name in static.axis_names] if per_axis else [name]
+            specs = tuple(MetricSpec(n, MetricType.DOUBLE, writable=writable) for n in names)
+            reads.append(PlannedRead(group, make(entry.number, entry.number, axis), specs,
+                                     (entry.deadband,) * len(specs)))
     return reads
 
 
@@ -302,13 +374,23 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return lambda result: [pick(result) for _, pick in SYSINFO_METRICS]
         case it.ReadProgramNumber():
             return lambda result: [result.running, result.main]
+        case it.ReadExecProgramName():
+            return lambda result: [result.name]
+        case it.ReadTimer():
+            return lambda result: [result.minutes * 60 + result.msec / 1000]
         case it.ReadActiveAlarms():
             return _alarm_values
         case it.ReadAxisNames() | it.ReadSpindleNames():
             return lambda result: [",".join(str(name) for name in result)]
+        case it.ReadParams(axis=-1) | it.ReadDiag(axis=-1):  # one number, one value per axis slot
+            return lambda result: list(result[0].values)
         case it.ReadParams() | it.ReadDiag():
             return lambda result: [record.value for record in result]
-        case it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions():
+        case it.ReadOperatorMessages():
+            return lambda result: [json.dumps([{"number": m.number, "type": m.type, "text": m.text} for m in result],
+                                              separators=(",", ":"))]
+        case (it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions() | it.ReadServoMeter()
+              | it.ReadToolOffsets()):
             return _as_list
         case it.ReadAlarmHistory():
             return lambda result: []  # published per entry as events, see edge.collect.alarms

@@ -32,6 +32,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
+from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
 from edge.collect.tickgrid import TickGrid
@@ -47,7 +48,6 @@ log = logging.getLogger(__name__)
 
 DROPPED_FUNCTIONS = MetricSpec("Plan/DroppedFunctions", MetricType.STRING,
                                description="functions this control does not answer (EW_FUNC/EW_NOOPT)")
-CONNECTED = MetricSpec("Connection/Online", MetricType.BOOLEAN)
 
 
 class DeviceSink(Protocol):
@@ -155,6 +155,8 @@ SessionFactory = Callable[[MachineConfig], CncSession]
 def default_session(machine: MachineConfig) -> CncSession:
     timeouts = machine.timeouts
     extra: dict[str, Any] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
+    if machine.path != 1:
+        extra["path"] = machine.path
     return open_session(machine.transport, machine.endpoint, fwlib_host=machine.fwlib_host,
                         timeout=timeouts.request_s, connect_timeout=timeouts.connect_s,
                         backoff_initial=timeouts.backoff_initial_s, backoff_max=timeouts.backoff_max_s, **extra)
@@ -340,8 +342,9 @@ class MachinePoller:
         for result in results:
             if isinstance(result, FocasError):
                 log.info("static read failed machine=%s error=%s", self.machine_id, result)
+        per_axis = await per_axis_numbers(self.session, self.machine)
         return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
-                             tuple(str(s) for s in spindles))
+                             tuple(str(s) for s in spindles), per_axis)
 
     def _static_samples(self, plan: pl.MachinePlan, samples: Sequence[Sample]) -> list[Sample]:
         """Values of the once-per-session metrics (sysinfo), stamped like the first tick."""
@@ -525,7 +528,7 @@ class MachinePoller:
         self.stats.count_error(error)
         self.last_error = f"{read.item.operation}: {error}"
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
-            operation = read.item.operation
+            operation = pl.drop_key(read.item)
             if operation not in self._dropped:
                 self._dropped[operation] = time.monotonic()
                 self._retrying.discard(operation)

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from edge.collect.plan import MachinePlan, PlannedRead
 from edge.command.requests import WriteOp
 from edge.focas import items as it
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
+from edge.targets import ALL_AXES, MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 
 def metric_target(plan: MachinePlan, name: str) -> WritableTarget | None:
@@ -36,8 +36,8 @@ def _element_target(item: it.ReadItem, index: int) -> WritableTarget | None:
         width = item.data_type.width
         start = item.start + index * width
         return PmcTarget(item.area, start, start + width - 1, item.data_type)
-    if isinstance(item, it.ReadParams):
-        return ParamTarget(item.first, item.first, item.axis)
+    if isinstance(item, it.ReadParams):  # an all-axes read publishes one metric per axis, in axis order
+        return ParamTarget(item.first, item.first, index + 1 if item.axis == ALL_AXES else item.axis)
     return None
 
 
@@ -52,7 +52,8 @@ def _overlaps(item: it.ReadItem, target: WritableTarget) -> bool:
     if isinstance(target, PmcTarget) and isinstance(item, it.ReadPmc):
         return item.area == target.area and item.start <= target.end and target.start <= item.end
     if isinstance(target, ParamTarget) and isinstance(item, it.ReadParams):
-        return item.first <= target.last and target.first <= item.last and item.axis == target.axis
+        same_axis = item.axis in (target.axis, ALL_AXES)
+        return item.first <= target.last and target.first <= item.last and same_axis
     return False
 
 

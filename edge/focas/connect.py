@@ -70,7 +70,7 @@ def open_session(transport: str, address: str, *, fwlib_host: str | None = None,
             raise ConfigError([f"fwlib_host {fwlib_host!r}: only beside transport focas (native)"])
         from edge.focas.routed import RoutedSession
 
-        common = {k: v for k, v in kw.items() if k != "max_subpackets"}  # timeouts and backoff
+        common = {k: v for k, v in kw.items() if k not in ("max_subpackets", "path")}  # timeouts and backoff
         # The library host's requests time out first, so its own session resets cleanly (its items fail)
         # before the routed session's timeout could reset the native connection too.
         library = {**common, "timeout": LIBRARY_TIMEOUT_SHARE * float(common.get("timeout", 5.0))}

@@ -43,6 +43,7 @@ from edge.focas.model import (
     PMC_AREAS,
     ActiveAlarm,
     ExecProgram,
+    OperatorMessage,
     ProgramDirEntry,
     ProgramNumbers,
     StatInfo,
@@ -305,13 +306,22 @@ def _scaled_list_encode(value: Sequence[float | None], req: RequestSubpacket, ct
     return encode_scaled_list(value)
 
 
-def _macros_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[float | None]:
-    expected = req.args[1] - req.args[0] + 1
-    values = decode_scaled_list(payload)
-    if len(values) != expected:
-        raise ProtocolError(f"macro read #{req.args[0]}..#{req.args[1]}: expected {expected} values, "
-                            f"got {len(values)}")
-    return values
+def _counted_scaled_list(what: str, prefix: str = "") -> PayloadDecoder:
+    """A decoder of one 8-B scaled value per number args[0]..args[1], the count checked."""
+
+    def decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[float | None]:
+        expected = req.args[1] - req.args[0] + 1
+        values = decode_scaled_list(payload)
+        if len(values) != expected:
+            raise ProtocolError(f"{what} {prefix}{req.args[0]}..{prefix}{req.args[1]}: expected {expected} "
+                                f"values, got {len(values)}")
+        return values
+
+    return decode
+
+
+_macros_decode = _counted_scaled_list("macro read", "#")
+_tool_offsets_decode = _counted_scaled_list("tool offsets")
 
 
 NAME_SLOT = 4
@@ -341,18 +351,21 @@ def _count_encode(value: int, req: RequestSubpacket, ctx: Context) -> bytes:
     return struct.pack(">h", value)
 
 
-def _records_codecs(form: SlotForm) -> tuple[PayloadDecoder, PayloadEncoder]:
+def _records_codecs(form: SlotForm, whole_slots: bool) -> tuple[PayloadDecoder, PayloadEncoder]:
     def decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> Any:
-        return decode_records(payload, ctx.max_axis, form)
+        return decode_records(payload, ctx.max_axis, form, whole_slots=whole_slots)
 
     def encode(value: Any, req: RequestSubpacket, ctx: Context) -> bytes:
-        return encode_records(value, ctx.max_axis, form)
+        return encode_records(value, ctx.max_axis, form, whole_slots=whole_slots)
 
     return decode, encode
 
 
-_REC4_DECODE, _REC4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE)
-_REC8_DECODE, _REC8_ENCODE = _records_codecs(SlotForm.SCALED)
+_REC4_DECODE, _REC4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE, whole_slots=False)
+_REC8_DECODE, _REC8_ENCODE = _records_codecs(SlotForm.SCALED, whole_slots=False)
+# Diagnosis records are sized by their slot, never by their type code (see model.DIAG_TYPE_CODES).
+_DIAG4_DECODE, _DIAG4_ENCODE = _records_codecs(SlotForm.FOUR_BYTE, whole_slots=True)
+_DIAG8_DECODE, _DIAG8_ENCODE = _records_codecs(SlotForm.SCALED, whole_slots=True)
 
 
 def _pmc_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[int | float]:
@@ -460,6 +473,28 @@ def _pmc_write_extra(req: RequestSubpacket, ctx: Context) -> bytes:
     return bytes(req.extra)
 
 
+_OPMSG_HEAD = struct.Struct(">iii")
+
+
+def _opmsg_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> list[OperatorMessage]:
+    """The first message, as HslCommunication reads it: i32 number, i32 type, i32 text length, text.
+    How further messages follow is not public, so bytes after the first message's text are not read."""
+    if not payload:
+        return []
+    _need(payload, _OPMSG_HEAD.size, "operator message", exact=False)
+    number, mtype, length = _OPMSG_HEAD.unpack_from(payload)
+    text = payload[_OPMSG_HEAD.size : _OPMSG_HEAD.size + max(0, length)]
+    return [OperatorMessage(number, mtype, c_string(text).rstrip())]
+
+
+def _opmsg_encode(value: Sequence[OperatorMessage], req: RequestSubpacket, ctx: Context) -> bytes:
+    if not value:
+        return b""
+    first = value[0]
+    text = first.text.encode("latin-1")
+    return _OPMSG_HEAD.pack(first.number, first.type, len(text)) + text
+
+
 # ---- the table ----------------------------------------------------------------------------------------
 
 SYSINFO = Function("sysinfo", CLASS_CNC, 0x18, Evidence.DOC, (), "SysInfo",
@@ -513,11 +548,11 @@ READ_PARAMS_8 = Function("read_params", CLASS_CNC, 0x8D, Evidence.CAPTURE, ("fir
                          "records: i32 number, i16 axis, i16 type, max_axis x 8-B scaled",
                          _REC8_DECODE, _REC8_ENCODE)
 READ_DIAG_4 = Function("read_diag", CLASS_CNC, 0x30, Evidence.CAPTURE, ("first", "last", "axis"),
-                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type, max_axis x 4-B slots",
-                       _REC4_DECODE, _REC4_ENCODE)
+                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type (diagnosis codes: "
+                       "2 = 2-word), max_axis x 4-B slots, each an i32", _DIAG4_DECODE, _DIAG4_ENCODE)
 READ_DIAG_8 = Function("read_diag", CLASS_CNC, 0x93, Evidence.CAPTURE, ("first", "last", "axis"),
-                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type, max_axis x 8-B scaled",
-                       _REC8_DECODE, _REC8_ENCODE)
+                       "list[ParamRecord]", "records: i32 number, i16 axis, i16 type (diagnosis codes: "
+                       "0 = byte), max_axis x 8-B scaled", _DIAG8_DECODE, _DIAG8_ENCODE)
 READ_MACROS = Function("read_macros", CLASS_CNC, 0x15, Evidence.DOC, ("first", "last"), "list[float | None]",
                        "(last - first + 1) x 8-B scaled", _macros_decode, _scaled_list_encode)
 WRITE_MACROS = Function("write_macros", CLASS_CNC, 0x16, Evidence.CODE, ("first", "last"),
@@ -542,12 +577,20 @@ SET_TIME = Function("set_time", CLASS_CNC, 0x46, Evidence.CODE, ("part",), "time
 READ_TIMER = Function("read_timer", CLASS_CNC, 0x120, Evidence.CODE, ("type",), "TimerValue",
                       "i32 minute, i32 msec (little-endian on a 31i-B)", _timer_decode, _timer_encode)
 
+TOOL_OFFSETS = Function("tool_offsets", CLASS_CNC, 0x08, Evidence.CODE, ("first", "last", "type"),
+                        "list[float | None]", "(last - first + 1) x 8-B scaled; type 0 length geometry, "
+                        "1 length wear, 2 radius geometry, 3 radius wear", _tool_offsets_decode,
+                        _scaled_list_encode)
+OPERATOR_MESSAGES = Function("operator_messages", CLASS_CNC, 0x34, Evidence.CODE, (), "list[OperatorMessage]",
+                             "i32 number, i32 type, i32 text_len, char text[text_len] (the first message; "
+                             "the form of further ones is not public)", _opmsg_decode, _opmsg_encode)
+
 FUNCTIONS: tuple[Function, ...] = (
     SYSINFO, STATINFO, ALARM_STATUS, ALARM_MESSAGES, PROGRAM_NUMBER, SEQUENCE_NUMBER, EXEC_PROGRAM_NAME,
     MAIN_PROGRAM_PATH, PROGRAM_DIRECTORY, ACTUAL_FEED, ACTUAL_SPINDLE_SPEED, SPINDLE_LOAD, POSITIONS,
     AXIS_NAMES, SPINDLE_NAMES, SERVO_METER, CONTROLLED_AXES, READ_PARAMS_4, READ_PARAMS_8, READ_DIAG_4,
     READ_DIAG_8, READ_MACROS, WRITE_MACROS, WRITE_MACRO_DOUBLE, READ_PMC, WRITE_PMC, READ_CLOCK, SET_TIME,
-    READ_TIMER,
+    READ_TIMER, TOOL_OFFSETS, OPERATOR_MESSAGES,
 )
 BY_COMMAND: dict[tuple[int, int], Function] = {(f.cls, f.command): f for f in FUNCTIONS}
 

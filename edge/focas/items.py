@@ -166,6 +166,31 @@ class ReadTimer(ReadItem):
     kind: int = 0
 
 
+TOOL_OFFSET_KINDS = ("length_geometry", "length_wear", "radius_geometry", "radius_wear")  # cnc_rdtofsr type 0..3
+
+
+@dataclass(frozen=True, slots=True)
+class ReadToolOffsets(ReadItem):
+    """-> list[float | None], offsets first..first+count-1 of one kind (TOOL_OFFSET_KINDS index)"""
+
+    kind: int = 0
+    first: int = 1
+    count: int = 1
+
+
+@dataclass(frozen=True, slots=True)
+class ReadOperatorMessages(ReadItem):
+    """-> list[OperatorMessage] (the first message only on the native transport)"""
+
+
+@dataclass(frozen=True, slots=True)
+class ReadPathStatus(ReadItem):
+    """-> StatInfo of one CNC path, whatever path the session reads (path discovery: a control answers a
+    path it does not have with EW_PATH)"""
+
+    path: int = 1
+
+
 @dataclass(frozen=True, slots=True)
 class ReadAlarmHistory(ReadItem):
     """-> list[AlarmHistoryEntry], newest first, at most `depth` (clamped to 1..250)"""

@@ -25,13 +25,21 @@ class PmcType(enum.IntEnum):
 
 
 class ParamType(enum.IntEnum):
-    """Parameter/diagnosis record type codes as 0x0e/0x8d answer them."""
+    """Parameter record type codes as 0x0e/0x8d answer them (the simulator's size of a number)."""
 
     BIT = 0
     BYTE = 1
     WORD = 2
     TWO_WORD = 3
     REAL = 4
+
+
+# Diagnosis records (0x30/0x93) carry other codes than parameters: 2 is a 2-word value on a 160i-W and a
+# 31i answers a byte diagnosis with 0 (public captures); byte 0, word 1, 2-word 2, bit 3 is pyfanuc's
+# readdiag table. A client therefore never sizes a diagnosis value by its type code.
+DIAG_TYPE_CODES: dict[ParamType, int] = {
+    ParamType.BYTE: 0, ParamType.WORD: 1, ParamType.TWO_WORD: 2, ParamType.BIT: 3, ParamType.REAL: 4,
+}
 
 
 PMC_AREAS = ("G", "F", "Y", "X", "A", "R", "T", "K", "C", "D", "M", "N", "E", "Z")
@@ -126,6 +134,15 @@ class ProgramDirEntry:
     number: int
     size: int
     comment: str
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorMessage:
+    """cnc_rdopmsg: a message the machine shows its operator (number, kind, text)."""
+
+    number: int
+    type: int
+    text: str
 
 
 @dataclass(frozen=True, slots=True)

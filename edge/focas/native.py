@@ -61,13 +61,15 @@ _SIMPLE: dict[type[it.ReadItem], Function] = {
     it.ReadSpindleSpeed: fn.ACTUAL_SPINDLE_SPEED,
     it.ReadAxisNames: fn.AXIS_NAMES,
     it.ReadSpindleNames: fn.SPINDLE_NAMES,
+    it.ReadOperatorMessages: fn.OPERATOR_MESSAGES,
 }
 
 # Item classes the native transport answers (ReadAlarmHistory has no public wire code).
 SUPPORTED_ITEMS: frozenset[str] = frozenset(
     {cls.__name__ for cls in _SIMPLE}
     | {"ReadActiveAlarms", "ReadProgramDirectory", "ReadSpindleLoad", "ReadPositions", "ReadServoMeter",
-       "ReadControlledAxes", "ReadParams", "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer"}
+       "ReadControlledAxes", "ReadParams", "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer",
+       "ReadToolOffsets", "ReadPathStatus"}
 )
 
 SPINDLE_LOAD_ARGS = (4, -1)  # HslCommunication: kind 4 = load, all spindles
@@ -132,6 +134,12 @@ def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
             return ItemPlan(item, calls, _clock)
         case it.ReadTimer(kind=kind):
             return _one(item, fn.READ_TIMER, kind, path=path)
+        case it.ReadPathStatus(path=other):
+            return _one(item, fn.STATINFO, path=other)
+        case it.ReadToolOffsets(kind=kind, first=first, count=count):
+            if count < 1 or not 0 <= kind < len(it.TOOL_OFFSET_KINDS):
+                raise ValueError(f"tool offsets: kind {kind} (0..3) and count {count} (>= 1)")
+            return _one(item, fn.TOOL_OFFSETS, first, first + count - 1, kind, path=path)
         case it.ReadAlarmHistory():
             return ItemPlan(item, error=NotSupported(item.operation, NO_WIRE_CODE))
     return ItemPlan(item, error=NotSupported(item.operation, "the native transport does not know this item"))

@@ -192,26 +192,28 @@ def record_stride(max_axis: int, form: SlotForm) -> int:
     return RECORD_HEAD_LAYOUT.size + max_axis * int(form)
 
 
-def _decode_slot4(slot: bytes, ptype: int) -> int:
-    # Bit and byte values sit in the last byte (the rest may be anything); word, 2-word and real as i32:
-    # diagnosis type 2 carries full 32-bit values in captures, so the whole slot is read for it.
-    if ptype in (ParamType.BIT, ParamType.BYTE):
+def _decode_slot4(slot: bytes, ptype: int, whole_slot: bool) -> int:
+    # A parameter's bit and byte values sit in the last byte; everything else is the whole slot as i32.
+    # Diagnosis records always read the whole slot: their type codes do not give the size (model.py).
+    if not whole_slot and ptype in (ParamType.BIT, ParamType.BYTE):
         return slot[3]
     return int(struct.unpack(">i", slot)[0])
 
 
-def _decode_slot8(data: bytes, offset: int, ptype: int) -> int | float | None:
+def _decode_slot8(data: bytes, offset: int, ptype: int, whole_slot: bool) -> int | float | None:
     value = decode_scaled(data, offset, strict=False)
-    if value is None or ptype == ParamType.REAL:
+    if value is None or (ptype == ParamType.REAL and not whole_slot):
         return value
     return int(value) if value.is_integer() else value
 
 
-def decode_records(payload: bytes, max_axis: int, form: SlotForm) -> list[ParamRecord]:
+def decode_records(payload: bytes, max_axis: int, form: SlotForm, *,
+                   whole_slots: bool = False) -> list[ParamRecord]:
     """Records as 0x0e/0x30/0x8d/0x93 answer them.
 
     For axis -1 every slot is returned (one per possible axis); otherwise only slot 0 is meaningful and
-    the record carries that one value (the rest of the slots may be garbage).
+    the record carries that one value (the rest of the slots may be garbage). `whole_slots` (diagnosis
+    records) decodes each value by the slot's size alone, whatever the record's type code says.
     """
     if max_axis < 1:
         raise ProtocolError(f"record decode needs max_axis >= 1, got {max_axis}")
@@ -228,23 +230,24 @@ def decode_records(payload: bytes, max_axis: int, form: SlotForm) -> list[ParamR
         for i in range(slots):
             offset = base + i * int(form)
             if form is SlotForm.FOUR_BYTE:
-                values.append(_decode_slot4(payload[offset : offset + 4], ptype))
+                values.append(_decode_slot4(payload[offset : offset + 4], ptype, whole_slots))
             else:
-                values.append(_decode_slot8(payload, offset, ptype))
+                values.append(_decode_slot8(payload, offset, ptype, whole_slots))
         records.append(ParamRecord(number, axis, ptype, tuple(values)))
     return records
 
 
-def _encode_slot4(value: int | float | None, ptype: int) -> bytes:
+def _encode_slot4(value: int | float | None, ptype: int, whole_slot: bool) -> bytes:
     number = 0 if value is None else round(value)
-    if ptype in (ParamType.BIT, ParamType.BYTE):
+    if not whole_slot and ptype in (ParamType.BIT, ParamType.BYTE):
         return bytes([0, 0, 0, number & 0xFF])
     if not _I32_MIN <= number <= _I32_MAX:
         raise ValueError(f"{value} does not fit a 4-byte parameter slot")
     return struct.pack(">i", number)
 
 
-def encode_records(records: Sequence[ParamRecord], max_axis: int, form: SlotForm) -> bytes:
+def encode_records(records: Sequence[ParamRecord], max_axis: int, form: SlotForm, *,
+                   whole_slots: bool = False) -> bytes:
     """The payload a CNC sends for `records`; missing slots are zero (as in the 31i captures)."""
     out = bytearray()
     for record in records:
@@ -253,7 +256,8 @@ def encode_records(records: Sequence[ParamRecord], max_axis: int, form: SlotForm
         out += RECORD_HEAD_LAYOUT.pack(record.number, record.axis, record.type)
         padded = list(record.values) + [0] * (max_axis - len(record.values))
         for value in padded:
-            out += _encode_slot4(value, record.type) if form is SlotForm.FOUR_BYTE else encode_scaled(value)
+            out += (_encode_slot4(value, record.type, whole_slots) if form is SlotForm.FOUR_BYTE
+                    else encode_scaled(value))
     return bytes(out)
 
 

@@ -17,7 +17,11 @@ hang               sends half of the next N answers, then         FocasTimeout
 garbage            answers the next N requests with bytes that    ProtocolError
                    are no FOCAS frame
 ew                 command code or function name -> EW code       that CncError subclass
-                   answered for it instead of data
+                   answered for it instead of data; "name/arg1"
+                   narrows it to one first argument (positions/7:
+                   one position kind, as a real EDM answers),
+                   "name/arg1/arg3" further to one third
+                   (read_params/1850/0: the axis-0 read only)
 max_sessions       connections beyond this many are reset         ConnectionLost
 =================  =============================================  ===========================
 """
@@ -128,11 +132,14 @@ class FaultPlan:
             self.drop_after = None
             return True
 
-    def ew_for(self, command: int, name: str) -> int | None:
-        """The EW code forced for this command (by code or by table name), if any."""
+    def ew_for(self, command: int, name: str, args: tuple[int, ...] = (0, 0, 0)) -> int | None:
+        """The EW code forced for this command (by code, table name, name/arg1 or name/arg1/arg3), if any."""
         with self._lock:
-            code = self.ew.get(command)
-            return code if code is not None else self.ew.get(name)
+            for key in (command, name, f"{name}/{args[0]}", f"{name}/{args[0]}/{args[2]}"):
+                code = self.ew.get(key)
+                if code is not None:
+                    return code
+            return None
 
 
 def _ew_key(key: str | int) -> str | int:

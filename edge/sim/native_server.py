@@ -29,7 +29,7 @@ import logging
 import struct
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from edge.focas import functions as fn
@@ -60,7 +60,7 @@ from edge.focas.frame import (
     request_chunks,
 )
 from edge.focas.functions import Context, Function, error_response
-from edge.focas.model import ParamRecord, PmcType
+from edge.focas.model import DIAG_TYPE_CODES, ParamRecord, ParamType, PmcType
 from edge.focas.values import RECORD_HEAD_LAYOUT, encode_scaled
 from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.profiles import Profile
@@ -153,7 +153,9 @@ def _params(state: MachineState, req: RequestSubpacket, ctx: Context) -> list[An
 
 
 def _diag(state: MachineState, req: RequestSubpacket, ctx: Context) -> list[Any]:
-    return state.read_diag(req.args[0], req.args[1], req.args[2])
+    """Diagnosis records carry the diagnosis type codes a real control sends, not the parameter ones."""
+    return [replace(record, type=DIAG_TYPE_CODES[ParamType(record.type)])
+            for record in state.read_diag(req.args[0], req.args[1], req.args[2])]
 
 
 def _clock(state: MachineState, req: RequestSubpacket, ctx: Context) -> Any:
@@ -204,6 +206,8 @@ HANDLERS: dict[Function, Handler] = {
     fn.READ_CLOCK: _clock,
     fn.SET_TIME: _set_time,
     fn.READ_TIMER: lambda s, r, c: s.timer(r.args[0]),
+    fn.TOOL_OFFSETS: lambda s, r, c: s.tool_offsets(r.args[2], r.args[0], r.args[1]),
+    fn.OPERATOR_MESSAGES: lambda s, r, c: s.operator_messages(),
 }
 
 
@@ -218,11 +222,13 @@ def answer_subpacket(state: MachineState, req: RequestSubpacket, faults: FaultPl
     ctx = ctx or Context.from_sysinfo(state.sysinfo())
     function = fn.BY_COMMAND.get((req.cls, req.command))
     name = _function_name(req)
-    forced = faults.ew_for(req.command, name) if faults else None
+    forced = faults.ew_for(req.command, name, req.args) if faults else None
     if forced is not None:
         return error_response(req, forced)
-    if req.path != 1:
+    path_state = state.for_path(req.path)
+    if path_state is None:
         return error_response(req, EW_PATH)
+    state = path_state
     if function is None or req.command in state.profile.refused_commands or function not in HANDLERS:
         return error_response(req, EW_FUNC)
     try:
@@ -294,7 +300,7 @@ def _direct_encoder(function: Function, ctx: Context) -> Callable[[Any], bytes] 
         return _scaled_list_bytes
     if encoder is fn.ACTUAL_FEED.encode_payload:  # one 8-B scaled value: feed, spindle speed
         return scaled_bytes
-    if encoder is fn.READ_PARAMS_8.encode_payload:  # 30i-form parameter and diagnosis records
+    if encoder in (fn.READ_PARAMS_8.encode_payload, fn.READ_DIAG_8.encode_payload):  # 30i-form records
         max_axis = ctx.max_axis
         return lambda records: _scaled_records_bytes(records, max_axis)
     return None
@@ -373,8 +379,10 @@ def _constant(answer: bytes) -> AnswerSource:
 def _answer_source(state: MachineState, req: RequestSubpacket, function: Function | None,
                    ctx: Context) -> AnswerSource:
     """answer_subpacket's decision tree, taken once: path, then function, then the data."""
-    if req.path != 1:
+    path_state = state.for_path(req.path)
+    if path_state is None:
         return _constant(error_response(req, EW_PATH).encode())
+    state = path_state
     if function is None or req.command in state.profile.refused_commands or function not in HANDLERS:
         return _constant(error_response(req, EW_FUNC).encode())
     return _guarded(req, _payload_source(state, req, function, ctx))

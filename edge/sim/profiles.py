@@ -8,7 +8,7 @@ shared/docs/focas-protocol.md (§3.3-§3.5); series/version strings are plausibl
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from edge.focas.model import SysInfo
 
@@ -40,6 +40,7 @@ class Profile:
     pmc_sizes: dict[str, int] = field(default_factory=lambda: dict(PMC_SIZES_30I))
     pmc_float_types: bool = True  # PMC data types 4/5 (float/double) exist on 30i-B/0i-F only
     timer_little_endian: bool = False  # a 31i-B sends cnc_rdtimer's payload little-endian (LMX 5f0a528)
+    paths: int = 1  # CNC paths (a twin-turret lathe has 2); requests for a path beyond answer EW_PATH
 
     @property
     def wide_records(self) -> bool:
@@ -101,6 +102,8 @@ PROFILES: dict[str, Profile] = {
         timer_little_endian=True,
     ),
 }
+# A twin-turret lathe: a 31i whose second path runs its own program.
+PROFILES["31i-2p"] = replace(PROFILES["31i"], name="31i-2p", paths=2)
 PROFILE_ALIASES = {"0i": "0i-F", "0if": "0i-F", "16": "16i", "30": "30i", "31": "31i", "31i-b": "31i"}
 
 

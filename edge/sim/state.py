@@ -26,7 +26,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime, tzinfo
 from typing import NamedTuple
 from zoneinfo import ZoneInfo
@@ -43,6 +43,7 @@ from edge.focas.model import (
     ActiveAlarm,
     AlarmHistoryEntry,
     ExecProgram,
+    OperatorMessage,
     ParamRecord,
     ParamType,
     PmcType,
@@ -53,6 +54,9 @@ from edge.focas.model import (
     TimerValue,
 )
 from edge.sim.profiles import Profile, get_profile
+
+TOOL_OFFSET_COUNT = 64  # offsets the simulated control keeps per kind
+LOAD_BLANK_MESSAGE = 2001  # the operator message shown between parts
 
 MACRO_RANGES = ((100, 199), (500, 999))  # common (volatile) and common (kept) variables
 PMC_WRITE_MAX = 32  # bytes per pmc_wrpmcrng call; more is EW_LENGTH
@@ -236,9 +240,11 @@ class MachineState:
         cycle: CycleSpec | None = None,
         seed: int = 0,
         start_parts: int = 0,
+        path: int = 1,
     ) -> None:
         self.profile = get_profile(profile) if isinstance(profile, str) else profile
         self.name = name
+        self.path = path
         self.cycle = cycle or CycleSpec()
         self.seed = seed
         self._time = time_source
@@ -267,6 +273,18 @@ class MachineState:
         self._seed_history()
         self._processed = self._phase
         self._refresh_signals(self._phase)
+        # Path 1 owns the further paths of a multi-path control, each running its own program and cycle.
+        self._paths: dict[int, MachineState] = {path: self}
+        for other in range(2, self.profile.paths + 1) if path == 1 else ():
+            cycle_of_path = replace(self.cycle, program_number=self.cycle.program_number + 1000 * (other - 1),
+                                    cut_seconds=self.cycle.cut_seconds * (1 + 0.25 * (other - 1)))
+            self._paths[other] = MachineState(self.profile, name=f"{name}/path{other}", time_source=time_source,
+                                              timezone=timezone, clock_offset=clock_offset, cycle=cycle_of_path,
+                                              seed=seed + 17 * (other - 1), start_parts=start_parts, path=other)
+
+    def for_path(self, path: int) -> MachineState | None:
+        """The state answering requests for CNC path `path` (None: the control has no such path)."""
+        return self._paths.get(path)
 
     # ---- time --------------------------------------------------------------------------------------
     def now(self) -> float:
@@ -442,6 +460,24 @@ class MachineState:
 
     def main_program_path(self) -> str:
         return f"//CNC_MEM/USER/PATH1/O{self.cycle.program_number:04d}"
+
+    def operator_messages(self) -> list[OperatorMessage]:
+        """The message a part program shows between parts (#3006-style), none while cutting."""
+        with self._lock:
+            cutting, _ = self._phase_at(self._cycle_time())
+            return [] if cutting else [OperatorMessage(LOAD_BLANK_MESSAGE, 0, "LOAD NEXT BLANK")]
+
+    def tool_offsets(self, kind: int, first: int, last: int) -> list[float]:
+        """Tool offsets first..last of one kind (0 length geometry, 1 length wear, 2 radius geometry,
+        3 radius wear); TOOL_OFFSET_COUNT offsets exist."""
+        if not 0 <= kind <= 3:
+            raise cnc_error(EW_ATTRIB, "cnc_rdtofsr", message=f"offset type {kind} is not 0..3")
+        if not 1 <= first <= last <= TOOL_OFFSET_COUNT:
+            raise cnc_error(EW_NUMBER, "cnc_rdtofsr",
+                            message=f"offsets {first}..{last} are outside 1..{TOOL_OFFSET_COUNT}")
+        bases = ((100.0, 2.5), (0.0, -0.002), (5.0, 0.5), (0.0, 0.001))
+        base, step = bases[kind]
+        return [round(base + step * n, 4) for n in range(first, last + 1)]
 
     def program_directory(self, start: int = 1, count: int = 19) -> list[ProgramDirEntry]:
         """Programs numbered >= start, at most count of them (an empty list past the last)."""

@@ -16,9 +16,11 @@ from typing import Any
 import pytest
 
 from edge.cli import main
+from edge.cli.named_reads import NAMED_READS, TIMER_KINDS
 from edge.sim.native_server import NativeServer
 from edge.sim.packed_server import PackedServer, start_packed_server
 from edge.sim.state import MachineState
+from edge.targets import READ_NAMES
 from tests.helpers import free_port
 
 pytestmark = pytest.mark.integration
@@ -94,6 +96,81 @@ def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[st
     assert set(rows["positions"]["value"]) == set(sim.state.axis_names())
     assert set(rows["diag:980-981/1"]["value"]) == {"980", "981"}
     assert rows["clock"]["value"][:4].isdigit()
+
+
+def test_every_named_read_offers_what_the_client_reads(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """Loads, names, timers, program name/path/directory: every client function, one JSON shape."""
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, *NAMED_READS)
+    assert code == 0, err
+    rows = json_lines(out)
+    assert set(rows) == set(NAMED_READS) and all(row["error"] is None for row in rows.values())
+    state = sim.state
+    axes, spindles = state.axis_names(), state.spindle_names()
+    loads = rows["loads"]["value"]
+    assert list(loads["servo"]) == axes and list(loads["spindle"]) == spindles
+    assert rows["axes"]["value"] == {"names": axes, "controlled": len(axes)}
+    assert rows["spindles"]["value"] == {"names": spindles}
+    assert set(rows["timers"]["value"]) == set(TIMER_KINDS)
+    assert rows["timers"]["value"]["power_on"]["minutes"] == state.timer(0).minutes
+    program = rows["program"]["value"]
+    assert program["name"] == state.exec_program().name and program["path"] == state.main_program_path()
+    assert [p["number"] for p in rows["programs"]["value"]] == [p.number for p in state.program_directory(1, 19)]
+    assert set(rows["speeds"]["value"]) == {"feed", "spindle"}
+
+
+def test_named_reads_match_the_target_grammar() -> None:
+    assert set(READ_NAMES) == set(NAMED_READS)
+
+
+def read_with_ew(sim: Sim, capsys: pytest.CaptureFixture[str], ew: dict[str, int],
+                 *items: str) -> tuple[int, str, str]:
+    """`focas-edge read --json` while the simulator answers these EW codes."""
+    sim.native.faults.update({"ew": ew})
+    try:
+        return run_cli(capsys, "read", "--json", sim.address, *items)
+    finally:
+        sim.native.faults.clear()
+
+
+def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """One position kind answered EW_NOOPT (as a real EDM answers distance-to-go): the other kinds are
+    printed, the refused one is named on stderr, the item does not fail."""
+    code, out, err = read_with_ew(sim, capsys, {"positions/7": 6}, "positions")
+    assert code == 0, err
+    row = json_lines(out)["positions"]
+    assert row["error"] is None
+    axes = row["value"]
+    assert set(axes) == set(sim.state.axis_names())
+    assert all(set(kinds) == {"absolute", "machine", "relative"} for kinds in axes.values())
+    assert "positions: distance" in err and "EW_NOOPT" in err
+
+
+def test_all_axes_reads_are_keyed_by_axis_name(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, "param:1850/all", "diag:308-309/all")
+    assert code == 0, err
+    rows = json_lines(out)
+    names = sim.state.axis_names()
+    assert rows["param:1850/all"]["value"] == {n: sim.state.read_param_value(1850, i + 1)
+                                               for i, n in enumerate(names)}
+    diags = rows["diag:308-309/all"]["value"]
+    assert set(diags) == {"308", "309"} and all(list(v) == names for v in diags.values())
+
+
+def test_axis_type_number_refused_at_axis_0_is_read_per_axis(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """A control answering EW_ATTRIB for an axis-type number read with axis 0: read it for every axis."""
+    code, out, err = read_with_ew(sim, capsys, {"read_params/1850/0": 4}, "param:1850")
+    assert code == 0, err
+    value = json_lines(out)["param:1850"]["value"]
+    assert list(value) == sim.state.axis_names()
+
+
+def test_path_option_reads_that_path(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    """The simulated 30i has one path: path 2 is refused with EW_PATH, by the CNC, naming it."""
+    code, out, err = run_cli(capsys, "read", "--json", "--path", "2", sim.address, "status")
+    assert code == 1
+    assert json_lines(out)["status"]["error"]["code"] == "EW_PATH" and "EW_PATH" in err
+    code, _, err = run_cli(capsys, "read", "--transport", "packed", "--path", "2", "unix:/tmp/x.sock", "status")
+    assert code == 2 and "reads path 1 only" in err
 
 
 def test_read_table_is_readable(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:

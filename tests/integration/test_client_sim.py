@@ -21,7 +21,7 @@ from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.errors import EW_FUNC, FocasError, LengthError, OutOfRange
 from edge.focas.frame import Frame, FrameDecoder, decode_response_body, encode_open_request, encode_request
-from edge.focas.model import PmcType
+from edge.focas.model import DIAG_TYPE_CODES, ParamType, PmcType
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.profiles import PROFILES
 from edge.sim.state import CycleSpec
@@ -67,6 +67,7 @@ def every_item() -> list[it.ReadItem]:
         it.ReadDiag(0, 9999, -1), it.ReadMacros(100, 199), it.ReadMacros(500, 999),
         it.ReadPmc("D", 2204, 2205, PmcType.WORD), it.ReadPmc("G", 0, 31), it.ReadPmc("R", 100, 107, PmcType.LONG),
         it.ReadClock(), *(it.ReadTimer(kind) for kind in range(5)),
+        *(it.ReadToolOffsets(kind, 3, 4) for kind in range(4)), it.ReadOperatorMessages(),
     ]
 
 
@@ -81,16 +82,19 @@ def expected_values(fleet: Fleet) -> list[object]:
         s.read_diag(0, 9999, -1), s.read_macros(100, 199), s.read_macros(500, 999),
         [600], s.read_pmc("G", 0, 31), s.read_pmc("R", 100, 107, PmcType.LONG),
         s.clock().replace(microsecond=0), *(s.timer(kind) for kind in range(5)),
+        *(s.tool_offsets(kind, 3, 6) for kind in range(4)), s.operator_messages(),
     ]
 
 
-def same_records(got: Any, want: Any) -> bool:
-    """Records match when number, axis, type and the state's values agree (the wire pads to max_axis)."""
+def same_records(got: Any, want: Any, diag: bool = False) -> bool:
+    """Records match when number, axis, type and the state's values agree (the wire pads to max_axis);
+    diagnosis records carry the diagnosis type codes on the wire."""
     if len(got) != len(want):
         return False
     for a, b in zip(got, want, strict=True):
         n = len(b.values)
-        if (a.number, a.axis, a.type, a.values[:n]) != (b.number, b.axis, b.type, b.values):
+        wire_type = DIAG_TYPE_CODES[ParamType(b.type)] if diag else b.type
+        if (a.number, a.axis, a.type, a.values[:n]) != (b.number, b.axis, wire_type, b.values):
             return False
     return True
 
@@ -104,10 +108,23 @@ async def test_every_function_on_every_profile(sim: tuple[Fleet, FakeClock]) -> 
     for item, got, want in zip(items, results, expected_values(fleet), strict=True):
         assert not isinstance(got, FocasError), f"{item}: {got}"
         if isinstance(item, it.ReadParams | it.ReadDiag):
-            assert same_records(got, want), f"{item}: {got} != {want}"
+            assert same_records(got, want, isinstance(item, it.ReadDiag)), f"{item}: {got} != {want}"
         else:
             assert got == want, f"{item}: {got!r} != {want!r}"
     assert results[2] == 1 << 15 and results[3][0].message == "COOLANT LEVEL LOW"
+
+
+async def test_diagnosis_records_carry_real_type_codes_and_whole_values(sim: tuple[Fleet, FakeClock]) -> None:
+    """Type 2 for a 2-word diagnosis (160i-W capture), 0 for a byte one (31i capture); a word value
+    (spindle speed, above 255) is not cut to a byte because its type code is 1."""
+    fleet, _ = sim
+    state = fleet[0].state
+    async with client(fleet) as cnc:
+        speed, temperature, position = await cnc.batch(
+            [it.ReadDiag(411, 411), it.ReadDiag(308, 308, 1), it.ReadDiag(980, 980, 1)])
+    assert speed[0].type == 1 and speed[0].value == state.read_diag(411, 411)[0].value > 255
+    assert temperature[0].type == 0 and temperature[0].value == state.read_diag(308, 308, 1)[0].value
+    assert position[0].type == 2 and position[0].value == state.read_diag(980, 980, 1)[0].value
 
 
 async def test_a_batch_of_ten_items_is_one_request_pdu(sim: tuple[Fleet, FakeClock]) -> None:

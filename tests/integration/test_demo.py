@@ -87,10 +87,11 @@ async def reaches_live_data(demo: Demo) -> None:
     await async_wait_for(lambda: len(demo.matching(LIVE_DATA)) >= 5 and demo.matching(LIVE_JSON), 60,
                          message="decoded Sparkplug DDATA and JSON state lines")
     births = re.compile(r"^DBIRTH \S+/(\S+) ")
-    await async_wait_for(lambda: len({m.group(1) for line in demo.lines if (m := births.match(line))}) == 3, 30,
-                         message="a DBIRTH for each of the three simulated CNCs")
+    devices = {"mill-1", "lathe-1", "lathe-1-path2", "mill-2"}
+    await async_wait_for(lambda: {m.group(1) for line in demo.lines if (m := births.match(line))} == devices, 30,
+                         message="a DBIRTH for each simulated CNC and for the lathe's second path")
     profiles = {m.group(1) for line in demo.lines if (m := re.search(r"profile (\S+)", line))}
-    assert profiles == {"30i", "16i", "0i-F"}, "three different series"
+    assert profiles == {"30i", "31i-2p", "0i-F"}, "three different series, the lathe with two paths"
 
 
 async def shows_the_compact_view(demo: Demo) -> None:

@@ -197,3 +197,27 @@ async def test_function_answering_ew_func_is_dropped_from_the_plan_once(
     assert not deaths, "the machine stayed online"
     errors = daemon.pollers["m1"].stats.item_errors
     assert sum(errors.values()) == 1, f"the function failed once, not every tick: {errors}"
+
+
+async def test_one_refused_position_kind_drops_only_that_kind(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    """A control answering EW_NOOPT for distance-to-go (as a real EDM does) keeps publishing the other
+    position kinds; only ReadPositions:distance is dropped."""
+    async with Fleet([MachineSpec(profile="30i", faults={"ew": {"positions/7": 6}})], base_port=0) as fleet:
+        machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, "
+                    f"poll: {{periods: {{status: 0.1s}}, positions: [absolute, distance]}}}}\n")
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines)))
+        task = asyncio.create_task(daemon.run())
+        try:
+            def dropped() -> str:
+                docs = [json.loads(m.payload) for m in observer.on("focas/m1/state/Plan/DroppedFunctions")]
+                return str(docs[-1]["value"]) if docs else ""
+
+            await async_wait_for(lambda: dropped() == "ReadPositions:distance", timeout=15,
+                                 message="only the distance kind is dropped")
+            seen = len(observer.on("focas/m1/state/Axis/X/Absolute"))
+            await async_wait_for(lambda: len(observer.on("focas/m1/state/Axis/X/Absolute")) > seen + 2,
+                                 timeout=15, message="absolute positions keep coming")
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 20) == 0

@@ -41,6 +41,9 @@ async def test_30i_answers_the_8_byte_record_form_and_refuses_the_4_byte_one() -
     assert (narrow.command, narrow.outcome, narrow.ew_name) == ("0x0e", Outcome.NOT_AVAILABLE, "EW_FUNC")
     assert steps[("ReadDiag (4-byte form)", "980 axis 1")].ew_name == "EW_FUNC"
     assert steps[("ReadDiag", "980 axis 1")].works
+    tool = steps[("ReadToolOffsets", "radius_wear 1..1")]
+    assert (tool.command, tool.works) == ("0x08", True)
+    assert steps[("ReadOperatorMessages", "")].command == "0x34" and steps[("ReadOperatorMessages", "")].works
     history = steps[("ReadAlarmHistory", "up to 10")]
     assert history.outcome == Outcome.NOT_SUPPORTED and history.rtt_ms is None  # nothing sent
     for step in report.steps:

@@ -208,6 +208,29 @@ def test_poll_plan_forms() -> None:
     assert poll.diags[0].metric_name("Diag") == "Servo/Error"
 
 
+def test_paths_expand_to_one_device_per_path() -> None:
+    two_paths = MINIMAL + "    paths: 2\n"
+    config = parse(two_paths)
+    assert [(d.id, d.path) for d in config.devices()] == [("m1", 1), ("m1-path2", 2)]
+    assert config.machine("m1-path2").host == "10.0.0.1"
+    clash = problems_of(two_paths + "  - {id: m1-path2, host: 10.0.0.2}\n")
+    assert any("its path 2 is the device 'm1-path2', already a machine id" in p for p in clash), clash
+    packed = problems_of(MINIMAL.replace("    host: 10.0.0.1\n",
+                                         "    transport: packed\n    address: unix:/run/x.sock\n    paths: 2\n"))
+    assert any("paths: only for transport focas" in p for p in packed), packed
+
+
+def test_numbered_reads_for_all_axes() -> None:
+    config = parse(_machine_with_poll("""
+        params: [{number: 1850, axis: all}]
+        diags: [{number: 308, axis: ALL, name: Servo/Temperature}]
+    """))
+    poll = config.machines[0].poll
+    assert (poll.params[0].axis, poll.diags[0].axis) == (-1, -1)
+    assert poll.params[0].metric_name("Param") == "Param/1850"
+    assert poll.diags[0].metric_name("Diag") == "Servo/Temperature"
+
+
 @pytest.mark.parametrize(
     ("poll", "expected"),
     [
@@ -228,6 +251,7 @@ def test_poll_plan_forms() -> None:
         ("periods: {status: 10ms}", "machines[0].poll.periods.status: Input should be greater than or equal"),
         ("periods: {status: fast}", "machines[0].poll.periods.status: expected a duration"),
         ("positions: [sideways]", "machines[0].poll.positions[0]: "),
+        ("params: [{number: 1850, axis: some}]", "machines[0].poll.params[0]: axis must be 0..32 or 'all', got 'some'"),
     ],
 )
 def test_poll_plan_errors(poll: str, expected: str) -> None:
@@ -372,6 +396,10 @@ def test_check_config_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     out, err = capsys.readouterr()
     assert "valid" in out and "m1" in out
     assert "warning: alarms.history_depth: 999" in err
+    two_paths = tmp_path / "two-paths.yaml"
+    two_paths.write_text(MINIMAL + "    paths: 2\n")
+    assert main(["check-config", str(two_paths)]) == 0
+    assert "2 paths (devices m1, m1-path2)" in capsys.readouterr().out
     bad = tmp_path / "bad.yaml"
     bad.write_text(MINIMAL.replace("host: 10.0.0.1", "host: 10.0.0.1\n    port: 0\n    timezone: X/Y"))
     assert main(["check-config", str(bad)]) == 2

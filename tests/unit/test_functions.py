@@ -19,6 +19,7 @@ from edge.focas.functions import Context, Function
 from edge.focas.model import (
     ActiveAlarm,
     ExecProgram,
+    OperatorMessage,
     ParamRecord,
     PmcType,
     ProgramDirEntry,
@@ -67,6 +68,9 @@ ROUND_TRIPS: list[tuple[Function, tuple[int, ...], Any, Context]] = [
     (fn.READ_CLOCK, (0,), date(2020, 5, 14), CTX16),
     (fn.READ_CLOCK, (1,), time(12, 15, 5), CTX16),
     (fn.READ_TIMER, (0,), TimerValue(123456, 59999), CTX16),
+    (fn.TOOL_OFFSETS, (1, 3, 0), [102.5, 105.0, None], CTX16),
+    (fn.OPERATOR_MESSAGES, (), [OperatorMessage(2001, 0, "LOAD NEXT BLANK")], CTX16),
+    (fn.OPERATOR_MESSAGES, (), [], CTX16),
 ]
 
 
@@ -117,6 +121,24 @@ def test_alarm_message_text_is_cut_at_msg_len() -> None:
     assert fn.ALARM_MESSAGES.decode_payload(payload, req, CTX16) == [ActiveAlarm(1001, 2, 0, "ABC")]
     with pytest.raises(ProtocolError, match="records of 24 bytes"):
         fn.ALARM_MESSAGES.decode_payload(payload + b"\x00", req, CTX16)
+
+
+def test_operator_message_fields_sit_where_hslcommunication_reads_them() -> None:
+    """HslCommunication reads i16 number at record byte 2, type at 6, text length at 10, text at 12 (the
+    low halves of three big-endian i32); bytes after the first message's text are not interpreted."""
+    payload = bytes.fromhex("000007d1" "00000000" "00000005") + b"HELLO" + b"\x00" * 7
+    req = fn.OPERATOR_MESSAGES.request()
+    sub = ResponseSubpacket(1, 0x34, 0, 0, payload)
+    assert fn.OPERATOR_MESSAGES.decode_response(sub, req, CTX16) == [OperatorMessage(2001, 0, "HELLO")]
+    with pytest.raises(ProtocolError, match="operator message"):
+        fn.OPERATOR_MESSAGES.decode_response(ResponseSubpacket(1, 0x34, 0, 0, b"\x00" * 6), req, CTX16)
+
+
+def test_tool_offset_count_must_match() -> None:
+    req = fn.TOOL_OFFSETS.request(1, 3, 1)
+    sub = ResponseSubpacket(1, 0x08, 0, 0, fn.encode_scaled_list([0.01, 0.02]))
+    with pytest.raises(ProtocolError, match="expected 3 values"):
+        fn.TOOL_OFFSETS.decode_response(sub, req, CTX16)
 
 
 def test_names_use_the_first_character_cells() -> None:
@@ -227,7 +249,8 @@ def test_every_item_class_is_planned() -> None:
                it.ReadMainProgramPath(), it.ReadProgramDirectory(), it.ReadFeed(), it.ReadSpindleSpeed(),
                it.ReadSpindleLoad(), it.ReadPositions("machine"), it.ReadAxisNames(), it.ReadSpindleNames(),
                it.ReadServoMeter(), it.ReadControlledAxes(), it.ReadParams(1, 2), it.ReadDiag(1, 2),
-               it.ReadMacros(1, 2), it.ReadPmc("D", 0, 3, PmcType.WORD), it.ReadClock(), it.ReadTimer(1)]
+               it.ReadMacros(1, 2), it.ReadPmc("D", 0, 3, PmcType.WORD), it.ReadClock(), it.ReadTimer(1),
+               it.ReadToolOffsets(1, 1, 4), it.ReadOperatorMessages(), it.ReadPathStatus(2)]
     all_items = {cls.__name__ for cls in vars(it).values()
                  if isinstance(cls, type) and issubclass(cls, it.ReadItem) and cls is not it.ReadItem}
     assert {s.operation for s in samples} == SUPPORTED_ITEMS == all_items - {"ReadAlarmHistory"}

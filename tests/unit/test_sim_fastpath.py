@@ -150,6 +150,9 @@ def _requests_for(profile: str) -> Iterator[RequestSubpacket]:
     yield fn.SET_TIME.request(1, extra=bytes(4))
     for kind in (0, 1, 2, 3, 4, 5, -1):
         yield fn.READ_TIMER.request(kind)
+    for first, last, kind in ((1, 4, 0), (1, 64, 3), (60, 70, 1), (0, 2, 2), (1, 1, 4)):
+        yield fn.TOOL_OFFSETS.request(first, last, kind)
+    yield fn.OPERATOR_MESSAGES.request()
     yield fn.STATINFO.request(path=2)  # wrong path
     yield fn.READ_MACROS.request(500, 500, path=0)
     yield RequestSubpacket(CLASS_CNC, 0x7777)  # unknown command

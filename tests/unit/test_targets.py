@@ -39,6 +39,9 @@ from edge.targets import (
         ("param:1815/0.3", ParamTarget(1815, 1815, 0, 3)),
         ("param:6711.2", ParamTarget(6711, 6711, 0, 2)),
         ("diag:980-981/1", DiagTarget(980, 981, 1)),
+        ("param:1850/all", ParamTarget(1850, 1850, -1)),
+        ("param:1815/ALL.4", ParamTarget(1815, 1815, -1, 4)),
+        ("diag:308-309/all", DiagTarget(308, 309, -1)),
         ("sysinfo", NamedTarget("sysinfo")),
         (" Clock ", NamedTarget("clock")),
         ("positions", NamedTarget("positions")),
@@ -83,6 +86,13 @@ def test_target_error_is_value_error() -> None:
 def test_read_only_targets_are_not_writable(text: str) -> None:
     with pytest.raises(TargetError, match="read-only"):
         parse_writable(text)
+
+
+def test_all_axes_round_trips_and_is_read_only_for_parameters() -> None:
+    assert str(parse_target("param:1850/all")) == "param:1850/all"
+    assert str(parse_target("diag:308-309/all")) == "diag:308-309/all"
+    with pytest.raises(TargetError, match="names one axis"):
+        parse_writable("param:1850/all")
 
 
 def test_assignment_splits_target_and_value() -> None:

@@ -154,6 +154,17 @@ def test_four_byte_word_and_two_word_read_the_whole_slot() -> None:
     assert record.values == (-598358, 7, 0, 0, 0, 0, 0, 0)
 
 
+def test_diagnosis_records_are_sized_by_the_slot_never_by_the_type_code() -> None:
+    """A diagnosis word sent with type 0 or 1 (byte/word on pyfanuc's table, bit/byte for parameters)
+    keeps its whole 4-byte value; the 160i-W's type 2 record decodes as in the capture."""
+    payload = (struct.pack(">ihhi", 411, 0, 1, 1200) + bytes(28)
+               + struct.pack(">ihhi", 308, 0, 0, -300) + bytes(28)
+               + bytes.fromhex("0000039600000002001772a330303232203600000000000000000000000000000000000000000000"))
+    records = decode_records(payload, 8, SlotForm.FOUR_BYTE, whole_slots=True)
+    assert [r.value for r in records] == [1200, -300, 1536675]
+    assert encode_records(records, 8, SlotForm.FOUR_BYTE, whole_slots=True)[:8 + 4] == payload[:12]
+
+
 def test_scaled_slots_give_ints_for_integer_types_and_floats_for_real() -> None:
     real = ParamRecord(1420, -1, ParamType.REAL, (126.5, -0.3, None, 0.0))
     long_ = ParamRecord(6711, 0, ParamType.TWO_WORD, (52638,))

@@ -1,0 +1,107 @@
+"""The named reads of `focas-edge read` (sysinfo, status, program, loads, timers ...): which read items
+each needs, which of them may fail alone, and how their results become the printed value.
+
+Every function the client has is reachable here by one name. A composite read degrades per part: a part
+listed in `parts` that fails (a position kind a control does not have) is left out of the value and
+named on stderr; the item fails only when a required item or every part failed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from edge.focas import items as it
+
+Shaper = Callable[[list[Any]], object]
+
+TIMER_KINDS = ("power_on", "operating", "cutting", "cycle", "free")  # cnc_rdtimer type 0..4
+TOOL_OFFSETS_SHOWN = 16  # offsets 1..16 of each kind
+
+
+@dataclass(frozen=True, slots=True)
+class NamedRead:
+    """The read items of one named read; `parts` maps item index -> part name for items that may fail alone
+    (the shaper then gets None in their place)."""
+
+    items: tuple[it.ReadItem, ...]
+    shape: Shaper
+    parts: dict[int, str] = field(default_factory=dict)
+
+
+def _by_name(names: Sequence[object], values: Sequence[object] | None) -> dict[str, object] | None:
+    if values is None:
+        return None
+    return {str(name): value for name, value in zip(names, values, strict=False)}
+
+
+def _positions(results: list[Any]) -> object:
+    names, *kinds = results
+    table: dict[str, dict[str, object]] = {}
+    for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
+        if values is None:  # this kind failed alone
+            continue
+        for name, value in zip(names, values, strict=False):
+            table.setdefault(str(name), {})[kind] = value
+    return table
+
+
+def _program(results: list[Any]) -> object:
+    numbers, sequence, executing, path = results
+    value: dict[str, object] = {"running": numbers.running, "main": numbers.main, "sequence": sequence}
+    if executing is not None:
+        value["name"] = executing.name
+    if path is not None:
+        value["path"] = path
+    return value
+
+
+def _loads(results: list[Any]) -> object:
+    axes, servo, spindles, spindle = results
+    loads = {"servo": _by_name(axes, servo), "spindle": _by_name(spindles, spindle)}
+    return {kind: value for kind, value in loads.items() if value is not None}
+
+
+def _tool_offsets(results: list[Any]) -> object:
+    """{offset number: {kind: value}} for the kinds the control answered."""
+    table: dict[str, dict[str, object]] = {}
+    for kind, values in zip(it.TOOL_OFFSET_KINDS, results, strict=True):
+        for number, value in enumerate(values or (), start=1):
+            table.setdefault(str(number), {})[kind] = value
+    return table
+
+
+def _named_parts(names: Sequence[str], first: int = 0) -> dict[int, str]:
+    return {first + index: name for index, name in enumerate(names)}
+
+
+def _dropping_none(names: Sequence[str]) -> Shaper:
+    return lambda results: {n: v for n, v in zip(names, results, strict=True) if v is not None}
+
+
+NAMED_READS: dict[str, NamedRead] = {
+    "sysinfo": NamedRead((it.ReadSysInfo(),), lambda r: r[0]),
+    "status": NamedRead((it.ReadStatus(),), lambda r: r[0]),
+    "alarms": NamedRead((it.ReadAlarmStatus(), it.ReadActiveAlarms(32)),
+                        lambda r: {"status": r[0], "active": r[1]}),
+    "program": NamedRead((it.ReadProgramNumber(), it.ReadSequenceNumber(), it.ReadExecProgramName(),
+                          it.ReadMainProgramPath()), _program, {2: "name", 3: "path"}),
+    "programs": NamedRead((it.ReadProgramDirectory(),), lambda r: r[0]),
+    "positions": NamedRead((it.ReadAxisNames(), *(it.ReadPositions(kind) for kind in it.POSITION_KINDS)),
+                           _positions, _named_parts(it.POSITION_KINDS, first=1)),
+    "axes": NamedRead((it.ReadAxisNames(), it.ReadControlledAxes()),
+                      lambda r: {"names": r[0], "controlled": r[1]}),
+    "spindles": NamedRead((it.ReadSpindleNames(),), lambda r: {"names": r[0]}),
+    "speeds": NamedRead((it.ReadFeed(), it.ReadSpindleSpeed()), _dropping_none(("feed", "spindle")),
+                        _named_parts(("feed", "spindle"))),
+    "loads": NamedRead((it.ReadAxisNames(), it.ReadServoMeter(), it.ReadSpindleNames(), it.ReadSpindleLoad()),
+                       _loads, {1: "servo", 3: "spindle"}),
+    "timers": NamedRead(tuple(it.ReadTimer(kind) for kind in range(len(TIMER_KINDS))),
+                        _dropping_none(TIMER_KINDS), _named_parts(TIMER_KINDS)),
+    "messages": NamedRead((it.ReadOperatorMessages(),), lambda r: r[0]),
+    "tool_offsets": NamedRead(tuple(it.ReadToolOffsets(kind, 1, TOOL_OFFSETS_SHOWN)
+                                    for kind in range(len(it.TOOL_OFFSET_KINDS))),
+                              _tool_offsets, _named_parts(it.TOOL_OFFSET_KINDS)),
+    "clock": NamedRead((it.ReadClock(),), lambda r: r[0]),
+}
