@@ -128,6 +128,8 @@ def render_config(machines: list[ProbedMachine], unreachable: list[tuple[str, st
             out.append(f"    transport: {machine.transport}")
         if machine.report.model:
             out.append(f"    series: {_quoted(machine.report.model)}")
+        if machine.report.paths > 1:
+            out.append(f"    paths: {machine.report.paths}    # each path beyond the first is a device of its own")
         out.extend(poll_lines(machine.report))
     for address, reason in unreachable:
         where = parse_address(address)

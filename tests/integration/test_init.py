@@ -15,7 +15,7 @@ from edge.sim.profiles import PROFILES
 
 pytestmark = pytest.mark.integration
 
-NAMES = ["mill-0if", "mill-16i", "mill-30i", "lathe-31i", "slow-30i"]
+NAMES = ["mill-0if", "mill-16i", "mill-30i", "lathe-31i", "slow-30i", "lathe-2p"]
 
 
 def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: Path,
@@ -23,6 +23,7 @@ def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: P
     specs = [MachineSpec(profile=name) for name in ("0i-F", "16i", "30i")]
     specs.append(MachineSpec(profile="31i", faults={"ew": {"read_macros": 6, "read_pmc": 1}}))
     specs.append(MachineSpec(profile="30i", faults={"latency": 0.03}))
+    specs.append(MachineSpec(profile="31i-2p"))
     assert {spec.profile for spec in specs} == set(PROFILES)
     out = tmp_path / "edge.yaml"
     with FleetThread(Fleet(specs, base_port=0)) as fleet:
@@ -37,7 +38,7 @@ def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: P
     assert config.mqtt.sparkplug is not None and config.mqtt.sparkplug.edge_node_id == "gw-7"
     assert not config.writes.enabled
     assert [m.id for m in config.machines] == NAMES
-    assert [m.series for m in config.machines] == ["0i-FM", "16i-BM", "30i-BM", "31i-BT", "30i-BM"]
+    assert [m.series for m in config.machines] == ["0i-FM", "16i-BM", "30i-BM", "31i-BT", "30i-BM", "31i-BT"]
     for machine in config.machines[:3]:
         poll = machine.poll
         assert poll.positions == ["absolute", "machine"] and poll.part_count
@@ -47,6 +48,7 @@ def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: P
     lathe = config.machines[3].poll
     assert lathe.macros == [] and lathe.pmc == [], "functions the control refused are left out"
     assert config.machines[4].poll.periods.status > 0.5, "a slow control is polled less often"
+    assert [m.paths for m in config.machines] == [1, 1, 1, 1, 1, 2], "a two-path lathe is configured with both paths"
     text = out.read_text()
     assert "# macros: #500..#505 did not answer" in text
     assert yaml.safe_load(text)["writes"] == {"enabled": False}
