@@ -7,7 +7,6 @@ import asyncio
 import json
 import logging
 import re
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -20,13 +19,6 @@ from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer
 
 pytestmark = pytest.mark.integration
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 def skew(observer: Observer) -> float | None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import AsyncIterator
 from datetime import UTC
 from pathlib import Path
 
@@ -28,13 +27,6 @@ def machine_entry(machine_id: str, port: int, **fields: object) -> str:
     extra = "".join(f", {k}: {json.dumps(v)}" for k, v in fields.items())
     return (f"  - {{id: {machine_id}, host: 127.0.0.1, port: {port}{extra}, "
             f"timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.5}}}}\n")
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 async def start_daemon(text: str) -> tuple[Daemon, asyncio.Task[int]]:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -21,13 +20,6 @@ from tests.integration.mqtt_observer import Observer, metrics_by_name
 pytestmark = pytest.mark.integration
 
 LOAD = "focas/m1/state/Spindle/1/Load"
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 def config(broker: Mosquitto, state_dir: Path, port: int, poll: str = "") -> str:

@@ -8,7 +8,7 @@ import asyncio
 import json
 import logging
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,13 +36,6 @@ def config_text(broker: Mosquitto, state_dir: Path, fleet: Fleet) -> str:
         f"timeouts: {{request_s: {REQUEST_TIMEOUT_S}, connect_s: 1, backoff_initial_s: 0.1, "
         f"backoff_max_s: 0.5}}}}\n" for i, m in enumerate(fleet))
     return daemon_config(broker, state_dir, machines)
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 @dataclass

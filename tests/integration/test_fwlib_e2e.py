@@ -60,13 +60,6 @@ async def host(standin: Standin, tmp_path: Path) -> AsyncIterator[FwlibHost]:
         await running.close()
 
 
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
-
-
 def machine(host: FwlibHost) -> str:
     poll = "poll: {periods: {status: 0.25, params: 0.25}, part_count: false, params: [{number: 6711}]}"
     return (f"  - {{id: m1, transport: packed, address: '{host.endpoints['m1'].address}', {TIMEOUTS}, "

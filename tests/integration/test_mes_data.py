@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -23,13 +22,6 @@ from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer
 
 pytestmark = pytest.mark.integration
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 def json_value(observer: Observer, topic: str) -> object:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import re
-from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -70,13 +69,6 @@ def check(metrics: list[tuple[str, str, str]], rows: list[Row], where: str) -> s
             f"{where}: {name} is {datatype} {unit!r}, the catalogue says {row.datatype} {sorted(row.units)}"
         used.add(row.pattern)
     return used
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 def birth_metrics(observer: Observer, topic: str) -> list[tuple[str, str, str]]:

@@ -99,13 +99,6 @@ def bdseq_of(message: Received) -> int:
 
 
 @pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
-
-
-@pytest.fixture
 async def daemons() -> AsyncIterator[list[DaemonProcess]]:
     started: list[DaemonProcess] = []
     yield started

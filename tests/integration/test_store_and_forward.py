@@ -80,13 +80,6 @@ async def relay(mosquitto: Mosquitto) -> AsyncIterator[TcpRelay]:
 
 
 @pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
-
-
-@pytest.fixture
 async def fleet() -> AsyncIterator[Fleet]:
     """Five machines whose Macro/500 changes every 50 ms: every 0.1 s tick has deltas."""
     async with Fleet([MachineSpec(profile="30i") for _ in range(MACHINES)], base_port=0) as f:

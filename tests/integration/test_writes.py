@@ -59,13 +59,6 @@ def config_text(broker: Mosquitto, state_dir: Path, machines: str, deadline: flo
     return daemon_config(broker, state_dir, machines, WRITES.format(deadline=deadline))
 
 
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
-
-
 class Running:
     """A daemon under test plus helpers to write to it like an MES would."""
 
