@@ -6,6 +6,7 @@
 #   /etc/focas-edge/edge.yaml  an example config (a conffile), root:focas-edge 0640
 #   /usr/share/focas-edge/   all example configs and drop-ins
 # WHEELHOUSE=DIR installs the dependencies from DIR only (no index): an offline or cross-platform build.
+# WHEEL=FILE uses that focas-edge wheel instead of building one (it is pure Python: any machine builds it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python=${DEB_PYTHON:-/usr/bin/python3}
@@ -17,7 +18,11 @@ venv=/opt/focas-edge
 rm -rf "$build"
 mkdir -p "$stage/DEBIAN" dist
 
-"$python" -m pip wheel --quiet --no-deps -w "$build/wheel" .
+if [[ -n ${WHEEL:-} ]]; then
+    mkdir -p "$build/wheel" && cp "$WHEEL" "$build/wheel/"
+else
+    "$python" -m pip wheel --quiet --no-deps -w "$build/wheel" .
+fi
 "$python" -m venv "$stage$venv"
 pip_args=(--quiet --no-compile --disable-pip-version-check)
 [[ -n ${WHEELHOUSE:-} ]] && pip_args+=(--no-index --find-links "$WHEELHOUSE")

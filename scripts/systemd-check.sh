@@ -12,7 +12,7 @@ deb=$(bash scripts/build-deb.sh | tail -n 1)
 name=focas-check-$$
 log=build/systemd-check-console.log
 mkdir -p build
-systemd-nspawn --quiet --ephemeral --boot --private-network --machine="$name" -D "$root" \
+systemd-nspawn --quiet --register=no --keep-unit --ephemeral --boot --private-network --machine="$name" -D "$root" \
     --bind-ro="$PWD/dist:/mnt/dist" --bind-ro="$PWD/scripts:/mnt/scripts" >"$log" 2>&1 </dev/null &
 nspawn=$!
 cleanup() {
