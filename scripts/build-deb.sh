@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Build dist/focas-edge_<version>_<arch>.deb for this machine's architecture with dpkg-deb:
+# Build dist/ (or $DEB_OUT_DIR) focas-edge_<version>_<arch>.deb for this machine's architecture with dpkg-deb:
 #   /opt/focas-edge          the daemon in its own venv (Debian's python3, so it runs on Debian 12 / Pi OS)
 #   /usr/bin/focas-edge      on PATH
 #   /lib/systemd/system/     every unit in systemd/ (enabled by nobody: the admin enables it)
@@ -12,11 +12,12 @@ cd "$(dirname "$0")/.."
 python=${DEB_PYTHON:-/usr/bin/python3}
 arch=$(dpkg --print-architecture)
 version=$(sed -n 's/^version *= *"\(.*\)"/\1/p' pyproject.toml | head -1)
-build=build/deb-$arch
-stage=$build/root
+build=${DEB_BUILD_DIR:-build}/deb-$arch
+out=${DEB_OUT_DIR:-dist}
+stage=$(realpath -m "$build")/root
 venv=/opt/focas-edge
 rm -rf "$build"
-mkdir -p "$stage/DEBIAN" dist
+mkdir -p "$stage/DEBIAN" "$out"
 
 if [[ -n ${WHEEL:-} ]]; then
     mkdir -p "$build/wheel" && cp "$WHEEL" "$build/wheel/"
@@ -28,7 +29,7 @@ pip_args=(--quiet --no-compile --disable-pip-version-check)
 [[ -n ${WHEELHOUSE:-} ]] && pip_args+=(--no-index --find-links "$WHEELHOUSE")
 "$stage$venv/bin/python" -m pip install "${pip_args[@]}" "$build"/wheel/focas_edge-*.whl
 # The venv was made at the staging path: point its scripts and config at where it is installed.
-grep -rlI --null "$PWD/$stage$venv" "$stage$venv/bin" "$stage$venv/pyvenv.cfg" | xargs -0 -r sed -i "s|$PWD/$stage$venv|$venv|g"
+grep -rlI --null "$stage$venv" "$stage$venv/bin" "$stage$venv/pyvenv.cfg" | xargs -0 -r sed -i "s|$stage$venv|$venv|g"
 find "$stage$venv" -name __pycache__ -prune -exec rm -rf {} +
 
 install -d "$stage/usr/bin" "$stage/lib/systemd/system" "$stage/etc/focas-edge" \
@@ -65,6 +66,6 @@ Description: FANUC CNC (FOCAS/Ethernet) to MQTT collector
 CONTROL
 echo /etc/focas-edge/edge.yaml > "$stage/DEBIAN/conffiles"
 install -m 0755 packaging/deb/postinst packaging/deb/prerm packaging/deb/postrm "$stage/DEBIAN/"
-deb=dist/focas-edge_${version}_${arch}.deb
+deb=$out/focas-edge_${version}_${arch}.deb
 dpkg-deb --root-owner-group -Zxz --build "$stage" "$deb" >/dev/null
 echo "$deb"
