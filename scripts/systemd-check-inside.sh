@@ -57,6 +57,21 @@ check "stop was clean (exit 0, Result=success)" \
 check "journal shows the stopped line" journal_has "stopped"
 check "no SIGKILL at stop" bash -c '! journalctl -u focas-edge --no-pager | grep -q "SIGKILL"'
 
+# The credentials drop-in that config/tls-broker.yaml relies on (LoadCredential=mqtt-password).
+install -D -m 0644 /usr/share/focas-edge/systemd/focas-edge-credentials.conf \
+    /etc/systemd/system/focas-edge.service.d/credentials.conf
+systemctl daemon-reload
+{ printf 'mqtt:\n  username: focas-edge\n  password_file: /run/credentials/focas-edge.service/mqtt-password\n'
+  config 1 | tail -n +2; } > /etc/focas-edge/edge.yaml
+check "credentials drop-in without its source file: start refused" bash -c '! systemctl start focas-edge 2>/dev/null'
+systemctl reset-failed focas-edge
+install -d -m 0700 /etc/focas-edge/credentials
+install -m 0600 /dev/null /etc/focas-edge/credentials/mqtt-password && echo s3cret > /etc/focas-edge/credentials/mqtt-password
+check "start with the password as a credential (source root-only 0600)" systemctl start focas-edge
+check "data flows with it" wait_msg "spBv1.0/check/DDATA/gw/sim-1"
+systemctl stop focas-edge
+rm -r /etc/systemd/system/focas-edge.service.d && systemctl daemon-reload
+
 echo "state_dir: /proc/nope" > /tmp/proc.yaml; config 1 >> /tmp/proc.yaml; cp /tmp/proc.yaml /etc/focas-edge/edge.yaml
 systemctl start focas-edge 2>/dev/null
 # "failed" (not "activating (auto-restart)"): RestartPreventExitStatus=2 means no restart is scheduled.
