@@ -19,17 +19,10 @@ from edge.bundle import bundled
 from edge.cli import main
 from edge.config import parse_config
 from edge.service_access import Account, lookup_account, service_problems, state_dir_problem
+from tests.unit.test_config import MINIMAL
 
 REPO = Path(__file__).resolve().parents[2]
 UNIT = REPO / "systemd" / "focas-edge.service"
-MINIMAL = """
-mqtt:
-  host: broker
-  sparkplug: {group_id: g, edge_node_id: n}
-machines:
-  - id: m1
-    host: 10.0.0.1
-"""
 
 
 def unit_values(text: str, key: str) -> list[str]:
