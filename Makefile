@@ -62,3 +62,16 @@ fuzz: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+
+## make deb: dist/focas-edge_<version>_<arch>.deb for this machine's architecture (dpkg-deb; docs/install.md)
+.PHONY: deb systemd-check arm64-check
+deb:
+	bash scripts/build-deb.sh
+
+## make systemd-check: the .deb installed and run under a real systemd (nspawn, Debian 12); minutes, as root
+systemd-check:
+	bash scripts/systemd-check.sh
+
+## make arm64-check: the arm64 .deb built and run in an arm64 Debian 12 under qemu-user-static; slow, as root
+arm64-check:
+	bash scripts/arm64-check.sh

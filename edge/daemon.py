@@ -27,6 +27,7 @@ from edge.publish.settings import PublishSettings
 from edge.publish.spool import open_spool
 from edge.samples import MetricType, Sample
 from edge.sdnotify import SystemdNotifier
+from edge.service_access import state_dir_problem
 from edge.status_http import StatusServer
 
 log = logging.getLogger(__name__)
@@ -294,6 +295,9 @@ def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = N
     config = load_config(config_path)
     for warning in config.warnings:
         log.warning("config: %s", warning)
+    unusable = state_dir_problem(config.resolved_state_dir)
+    if unusable is not None:
+        raise ConfigError([unusable], str(config_path))
 
     async def main() -> int:
         daemon = Daemon(config, config_path)

@@ -13,6 +13,7 @@ from typing import Any
 from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
 from edge.config import Config, load_config
+from edge.service_access import SERVICE_USER, service_problems, state_dir_problem
 
 
 def register(subparsers: Any) -> None:
@@ -23,15 +24,23 @@ def register(subparsers: Any) -> None:
         epilog="Exit codes: 0 valid, 2 invalid (every problem listed).")
     parser.add_argument("config", metavar="FILE", help="the YAML config file")
     parser.add_argument("--quiet", "-q", action="store_true", help="print nothing when the file is valid")
+    parser.add_argument("--as-service", action="store_true",
+                        help="also check that the systemd service's user can read every file the config names "
+                             "and write state_dir (under the unit's ProtectSystem=strict)")
+    parser.add_argument("--service-user", default=SERVICE_USER, metavar="NAME",
+                        help=f"the service's user for --as-service (default {SERVICE_USER})")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
+        problems = usability_problems(config, args.service_user if args.as_service else None)
     except ConfigError as exc:
-        print(f"{args.config}: invalid, {len(exc.problems)} problem(s):", file=sys.stderr)
-        for problem in exc.problems:
+        problems = exc.problems
+    if problems:
+        print(f"{args.config}: invalid, {len(problems)} problem(s):", file=sys.stderr)
+        for problem in problems:
             print(f"  {problem}", file=sys.stderr)
         return EXIT_USAGE
     for warning in config.warnings:
@@ -39,6 +48,16 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(summary(config, args.config))
     return EXIT_OK
+
+
+def usability_problems(config: Config, service_user: str | None) -> list[str]:
+    """What the daemon could not use: a state_dir set in the file, and with a service user, its access."""
+    problems = []
+    if config.state_dir is not None:
+        problems.append(state_dir_problem(config.state_dir))
+    if service_user is not None:
+        problems.extend(service_problems(config, service_user))
+    return [p for p in problems if p is not None]
 
 
 def summary(config: Config, source: str) -> str:

@@ -34,5 +34,6 @@ def handle(args: argparse.Namespace) -> int:
     try:
         return run_daemon(args.config)
     except ConfigError as exc:
-        print(f"focas-edge: {exc}", file=sys.stderr)
+        single = f"{exc.source}: {exc.problems[0]}" if len(exc.problems) == 1 else str(exc)
+        print(f"focas-edge: {single}", file=sys.stderr)
         return EXIT_USAGE

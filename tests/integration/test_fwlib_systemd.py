@@ -14,10 +14,11 @@ DAEMON_UNIT = UNIT.with_name("focas-edge.service")
 def test_unit_serves_sockets_only_the_daemons_user_can_reach() -> None:
     entries = unit_entries(UNIT.read_text())
     daemon = unit_entries(DAEMON_UNIT.read_text())
-    assert values(entries, "Service", "DynamicUser") == ["yes"]
-    # The daemon's dynamic user is named after its unit; sharing the name shares the UID.
-    assert values(daemon, "Service", "User") in ([], ["focas-edge"])
-    assert values(entries, "Service", "User") == ["focas-edge"]
+    # Both run as the package's system user: the daemon reaches the 0600 sockets, nobody else does. A
+    # DynamicUser could not read the root:focas-edge 0640 config either.
+    assert values(entries, "Service", "DynamicUser") in ([], ["no"])
+    assert values(daemon, "Service", "User") == values(entries, "Service", "User") == ["focas-edge"]
+    assert values(daemon, "Service", "Group") == values(entries, "Service", "Group") == ["focas-edge"]
     assert values(entries, "Service", "RuntimeDirectory") == ["focas-edge-fwlib"]
     assert values(entries, "Service", "RuntimeDirectoryMode") == ["0700"]
     assert values(entries, "Service", "RestartPreventExitStatus") == ["2"]

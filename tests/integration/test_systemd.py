@@ -62,8 +62,8 @@ def test_unit_declares_notify_watchdog_restart_and_hardening() -> None:
     assert one("Type") == "notify" and one("NotifyAccess") == "main"
     assert one("WatchdogSec").rstrip("s").isdigit()
     assert one("Restart") == "on-failure"
-    assert one("DynamicUser") == "yes"
-    assert one("StateDirectory") == "focas-edge" and one("ConfigurationDirectory") == "focas-edge"
+    assert one("User") == "focas-edge" and one("Group") == "focas-edge"  # the package's system user
+    assert one("StateDirectory") == "focas-edge"
     assert one("EnvironmentFile").lstrip("-") == "/etc/focas-edge/secrets.env"
     assert one("ExecStart").startswith(f"{INSTALLED_BINARY} run --config /etc/focas-edge/edge.yaml")
     assert "-HUP $MAINPID" in one("ExecReload")
