@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -19,13 +18,6 @@ from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer, metrics_by_name
 
 pytestmark = pytest.mark.integration
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 def _path_warnings(caplog: pytest.LogCaptureFixture) -> list[str]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -22,13 +21,6 @@ from tests.integration.mqtt_observer import Observer
 pytestmark = pytest.mark.integration
 
 WRITES = "writes: {enabled: true, allow: [{target: 'macro:500-599'}]}\n"
-
-
-@pytest.fixture
-async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
-    obs = Observer(mosquitto)
-    yield obs
-    obs.close()
 
 
 async def _request(observer: Observer, topic: str, body: object) -> object:

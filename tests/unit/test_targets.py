@@ -189,3 +189,10 @@ def test_a_bad_path_suffix_is_refused_naming_the_target(text: str, why: str) -> 
     with pytest.raises(TargetError, match=why) as caught:
         split_path(text)
     assert repr(text) in str(caught.value)
+
+
+@given(st.sampled_from(["macro:500", "pmc:R100.3", "pmc:D2204-D2207.word", "param:1825/1", "param:6711/0.2",
+                        "diag:980", "program"]), st.integers(1, 10))
+def test_any_target_with_a_path_suffix_splits_back(text: str, path: int) -> None:
+    assert split_path(f"{text}@{path}") == (text, path)
+    assert str(parse_target(text)) == str(parse_target(split_path(f"{text}@{path}")[0]))
