@@ -40,7 +40,8 @@ def _audit(state_dir: Path) -> list[dict[str, object]]:
 async def test_a_write_names_its_path_on_the_machines_own_command_topic(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
     """`@2` and "path": 2 on `focas/m1/cmd` land on path 2, a write without either on path 1; a path beyond
-    `paths: 2` is refused as unknown_path (audited, nothing written); `@2` with "path": 1 is malformed."""
+    `paths: 2` is refused as unknown_path (audited, nothing written, nor the rest of its list); `@2` with
+    "path": 1 is malformed."""
     async with Fleet([MachineSpec(profile="31i-2p")], base_port=0) as fleet:
         machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, paths: 2, "
                     f"poll: {{periods: {{status: 0.1s}}}}}}\n")
@@ -69,6 +70,12 @@ async def test_a_write_names_its_path_on_the_machines_own_command_topic(
             assert "paths: 2" in beyond["error"]["message"]
             assert first.read_macro(533) != 9.0 and second.read_macro(533) != 9.0
             assert any(line["request_id"] == "x" and line["outcome"] == "unknown_path" for line in _audit(tmp_path))
+
+            mixed = await _request(observer, "focas/m1/cmd", [
+                {"id": "m", "target": "macro:535", "value": 9.0}, {"id": "n", "target": "macro:536@3", "value": 9.0}])
+            assert isinstance(mixed, list)
+            assert [r["error"]["code"] for r in mixed] == ["skipped", "unknown_path"], mixed
+            assert first.read_macro(535) != 9.0, "a list with a refused write writes nothing"
 
             both = await _request(observer, "focas/m1/cmd",
                                   {"id": "y", "target": "macro:534@2", "path": 1, "value": 9.0})
