@@ -14,6 +14,9 @@ PMC addresses are byte addresses and ranges are inclusive, as pmc_rdpmcrng count
 `D2204-D2207.word` is two words (bytes 2204..2207), so its length must be a whole number of elements;
 a single typed element `D2204.word` is bytes 2204..2205.
 A bit is addressed on a single byte (PMC) or a single number (parameter), never on a range.
+
+A write or read names its CNC path with a suffix `@N` (`macro:500@2`, `pmc:R100.3@2`, `param:1825/1@2`):
+`split_path` takes it off before the grammar above applies; without one, path 1 (or the device's own) is meant.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from edge.focas.model import PMC_AREAS, PmcType
+from edge.focas.paths import MAX_PATHS
 
 
 class TargetError(ValueError):
@@ -33,6 +37,7 @@ MAX_MACRO = 99_999
 MAX_PMC_ADDRESS = 65_535
 MAX_PARAM = 65_535
 MAX_AXIS = 32
+MAX_PATH = MAX_PATHS  # `@N` names a path 1..MAX_PATH
 # The named reads of `focas-edge read` (edge/cli/named_reads.py says what each reads).
 READ_NAMES = ("sysinfo", "status", "alarms", "program", "programs", "positions", "axes", "spindles", "speeds",
               "loads", "timers", "messages", "tool_offsets", "clock")
@@ -148,6 +153,22 @@ def parse_target(text: str) -> Target:
         raise TargetError(f"{text!r}: unknown kind {kind!r}; expected macro, pmc, param or diag")
     target: Target = parser(text, rest.strip())
     return target
+
+
+_PATH_SUFFIX_RE = re.compile(r"(.*?)\s*@\s*(\d{1,9})\s*", re.ASCII | re.DOTALL)
+
+
+def split_path(text: str) -> tuple[str, int | None]:
+    """`macro:500@2` -> ("macro:500", 2); a target without `@` -> (text, None). TargetError for a bad `@N`."""
+    if "@" not in text:
+        return text, None
+    match = _PATH_SUFFIX_RE.fullmatch(text)
+    if match is None or "@" in match[1]:
+        raise TargetError(f"{text!r}: expected TARGET@PATH with PATH a number 1..{MAX_PATH}, e.g. macro:500@2")
+    path = int(match[2])
+    if not 1 <= path <= MAX_PATH:
+        raise TargetError(f"{text!r}: path {path} is not 1..{MAX_PATH}")
+    return match[1], path
 
 
 def parse_writable(text: str) -> WritableTarget:

@@ -33,6 +33,7 @@ from edge.targets import (
     Target,
     TargetError,
     parse_target,
+    split_path,
 )
 
 DEFAULT_TIMEOUT = 5.0
@@ -51,15 +52,16 @@ def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
                         help="focas: native FOCAS/Ethernet (default); packed: the packed-buffer surface")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
                         help=f"connect and request timeout (default {DEFAULT_TIMEOUT:g})")
-    parser.add_argument("--path", type=int, default=1, metavar="N",
-                        help="CNC path to read or write (a twin-turret lathe has 2; default 1)")
+    parser.add_argument("--path", type=int, default=None, metavar="N",
+                        help="CNC path to read or write (a twin-turret lathe has 2; default 1); an item may "
+                             "name it instead with @N (macro:500@2), the same for every item")
 
 
 def open_cnc(args: argparse.Namespace) -> Any:
     """An unconnected session for the CLI's address/transport/timeout; ConfigError on a bad address."""
     from edge.focas.connect import open_session
 
-    path = getattr(args, "path", 1)
+    path = getattr(args, "path", None) or 1
     if path < 1:
         raise ConfigError([f"--path {path}: paths are numbered from 1"])
     if path != 1 and args.transport != "focas":
@@ -283,13 +285,30 @@ def parse_and_open(command: str, args: argparse.Namespace, parse: Callable[[str]
                    texts: list[str]) -> tuple[list[T], Any] | int:
     """Every item parsed, then the session opened; a usage problem is printed and EXIT_USAGE returned."""
     try:
-        parsed = [parse(text) for text in texts]
+        bare, args.path = without_paths(texts, args.path)
+        parsed = [parse(text) for text in bare]
         return parsed, open_cnc(args)
     except TargetError as exc:
         print(f"focas-edge {command}: {exc}", file=sys.stderr)
     except ConfigError as exc:
         print(f"focas-edge {command}: {'; '.join(exc.problems)}", file=sys.stderr)
     return EXIT_USAGE
+
+
+def without_paths(texts: Sequence[str], explicit: int | None) -> tuple[list[str], int | None]:
+    """The items without their `@N` (in `TARGET@N` or `TARGET@N=VALUE`) and the one path of the session: a
+    command talks to one path, so every `@N` and --path must agree. TargetError names the item that does not."""
+    bare: list[str] = []
+    path = explicit
+    for text in texts:
+        target, sep, value = text.partition("=")
+        target, named = split_path(target)
+        if named is not None and path is not None and named != path:
+            where = f"--path {explicit}" if explicit is not None else f"another item names @{path}"
+            raise TargetError(f"{text!r}: names path {named} but {where}; one command reads or writes one path")
+        path = named if named is not None else path
+        bare.append(target + sep + value)
+    return bare, path
 
 
 def run(args: argparse.Namespace) -> int:

@@ -35,6 +35,7 @@ from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, Waterm
 from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
+from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
 from edge.collect.tickgrid import TickGrid
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
@@ -201,6 +202,7 @@ class MachinePoller:
         self._clock_epoch = 0.0  # that value as epoch seconds
         self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
         self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
+        self._paths = PathCheck(machine)
 
     @property
     def machine_id(self) -> str:
@@ -261,9 +263,10 @@ class MachinePoller:
             self.last_progress = time.monotonic()
             error = state.outcome.exception() if state.outcome else None
             delay = state.next_action.sleep if state.next_action else 0.0
-            self.last_error = f"connect failed: {error}"
+            reason = connect_error(self.machine, error)
+            self.last_error = f"connect failed: {reason}"
             log.warning("connect failed machine=%s attempt=%d error=%s retry_in=%.2fs",
-                        self.machine_id, state.attempt_number, error, delay)
+                        self.machine_id, state.attempt_number, reason, delay)
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(FocasError),
@@ -292,6 +295,7 @@ class MachinePoller:
     # ---- one session ---------------------------------------------------------------------------------
     async def _poll_session(self) -> None:
         static = await self._read_static()
+        paths = await self._paths.count(self.session)
         plan = pl.MachinePlan.build(self.machine, self.alarms_config, static)
         for operation in self._unsupported(plan):
             plan = plan.without(operation)
@@ -307,6 +311,9 @@ class MachinePoller:
         first = await self._tick(plan, frozenset(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
+        if paths is not None:
+            specs.append(PATH_COUNT)
+            extra.append(Sample(PATH_COUNT.name, paths, PATH_COUNT.type, extra[-1].timestamp_ms))
         born = [*first.samples, *self._changes.filter(extra)]
         await self.sink.device_online(self.machine_id, specs, born)
         self.online = True

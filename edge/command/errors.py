@@ -30,6 +30,7 @@ class ErrorCode(enum.StrEnum):
     PAYLOAD_TOO_LARGE = "payload_too_large"
     UNKNOWN_MACHINE = "unknown_machine"
     UNKNOWN_METRIC = "unknown_metric"  # DCMD metric with no write target behind it
+    UNKNOWN_PATH = "unknown_path"  # `@N` / "path": N beyond the paths configured for the machine
     DISABLED = "disabled"
     INVALID_TARGET = "invalid_target"
     NOT_ALLOWED = "not_allowed"

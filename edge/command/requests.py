@@ -1,6 +1,7 @@
 """The JSON write request and the validated write it becomes, checked before anything reaches a CNC.
 
     {"id": "42", "target": "pmc:R100.3", "value": true}          one write
+    {"target": "macro:500@2", "value": 1.5}                      on path 2 (or "path": 2; both must agree)
     [{"id": "a", "target": "macro:500", "value": 1.25}, {...}]   several, applied in order
 
 `WriteRequest` (pydantic) checks the shape, the target grammar (edge.targets, shared with the CLI and the
@@ -13,7 +14,7 @@ from __future__ import annotations
 import json
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pydantic import (
@@ -31,7 +32,16 @@ from pydantic_core import PydanticCustomError
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.signedness import PMC_READINGS
 from edge.focas.model import PmcType
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_writable
+from edge.targets import (
+    MAX_PATH,
+    MacroTarget,
+    ParamTarget,
+    PmcTarget,
+    TargetError,
+    WritableTarget,
+    parse_writable,
+    split_path,
+)
 
 I32 = (-(2**31), 2**31 - 1)
 FLOAT32_MAX = 3.4028234663852886e38
@@ -52,10 +62,11 @@ class WriteOp:
     target: WritableTarget
     value: WriteValue
     bounded: bool = False
+    path: int | None = None  # the CNC path named by the request (`@2`, "path": 2); None: the device's own
 
     @property
     def text(self) -> str:
-        return str(self.target)
+        return str(self.target) if self.path is None else f"{self.target}@{self.path}"
 
     def reply_value(self) -> object:
         """The requested value as a reply or audit line shows it."""
@@ -174,23 +185,29 @@ class WriteRequest(BaseModel):
     target: str = Field(max_length=64)
     value: Any  # checked against the target by make_op, which names what was expected
     client: str | None = Field(default=None, max_length=128)  # self-declared, for the audit log
+    path: StrictInt | None = Field(default=None, ge=1, le=MAX_PATH)  # the CNC path; `@N` in target says the same
 
     @field_validator("target")
     @classmethod
     def _grammar(cls, text: str) -> str:
         try:
-            parse_writable(text)
+            parse_writable(split_path(text)[0])
         except TargetError as exc:
             raise PydanticCustomError(ErrorCode.INVALID_TARGET.value, str(exc)) from None
         return text
 
     @model_validator(mode="after")
     def _fits(self) -> WriteRequest:
-        make_op(parse_writable(self.target), self.value)
+        self.op()
         return self
 
     def op(self) -> WriteOp:
-        return make_op(parse_writable(self.target), self.value)
+        text, suffix = split_path(self.target)
+        if suffix is not None and self.path is not None and suffix != self.path:
+            raise PydanticCustomError(ErrorCode.MALFORMED.value, f"target {self.target!r} names path {suffix} "
+                                      f"but path is {self.path}; name the path once, or the same in both")
+        path = suffix if suffix is not None else self.path
+        return replace(make_op(parse_writable(text), self.value), path=path)
 
 
 @dataclass(frozen=True, slots=True)
@@ -285,7 +302,7 @@ def _refusal(index: int, exc: ValidationError) -> CommandRefused:
     loc = ".".join(str(part) for part in error["loc"])
     message = str(error["msg"])
     if error["type"] == "extra_forbidden":
-        message = "unknown key (expected id, target, value, client)"
+        message = "unknown key (expected id, target, value, client, path)"
     elif error["type"] == "missing":
         message = "required"
     return CommandRefused(code, f"write {index}" + (f" {loc}" if loc else "") + f": {message}")

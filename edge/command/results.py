@@ -55,7 +55,7 @@ def reply(request_id: object, target_text: str | None, result: WriteResult) -> d
     body: dict[str, Any] = {
         "id": request_id,
         "ok": result.ok,
-        "target": str(result.op.target) if result.op is not None else target_text,
+        "target": result.op.text if result.op is not None else target_text,
         "error": None if result.ok else {"code": str(result.code), "message": result.message},
         "value_read_back": result.read_back,
         "cnc_time": iso_ms(result.cnc_time_ms),

@@ -13,6 +13,7 @@ import logging
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from itertools import groupby
 from typing import TYPE_CHECKING
 
 from edge.collect.plan import MachinePlan
@@ -32,6 +33,8 @@ if TYPE_CHECKING:
     from edge.publish.publisher import CommandSource, Publisher
 
 log = logging.getLogger(__name__)
+
+Routed = tuple[MachineConfig, WriteOp]  # a write and the device (path) whose session carries it out
 
 
 @dataclass
@@ -195,11 +198,10 @@ class CommandService:
         return results
 
     def _check(self, machine: MachineConfig, policy: WritePolicy,
-               items: Sequence[RequestItem]) -> tuple[WriteOp, ...] | list[WriteResult]:
-        """The ops to write (each marked whether a bound applied) if every item may be written; else a result
-        per item (the first refusal, the rest skipped)."""
-        sysinfo = self._sysinfo(machine.id)
-        ops: list[WriteOp] = []
+               items: Sequence[RequestItem]) -> tuple[Routed, ...] | list[WriteResult]:
+        """The ops to write, each with the device whose session writes its path (and marked whether a bound
+        applied), if every item may be written; else a result per item (the first refusal, the rest skipped)."""
+        ops: list[Routed] = []
         for index, item in enumerate(items):
             refusal = item.refused
             if refusal is None and self._closing:
@@ -207,8 +209,9 @@ class CommandService:
             if refusal is None:
                 assert item.op is not None
                 try:
-                    ops.append(replace(item.op, bounded=authorise(item.op, policy)))
-                    check_limits(item.op.target, sysinfo)
+                    device = self._path_device(machine, item.op.path)
+                    ops.append((device, replace(item.op, bounded=authorise(item.op, policy))))
+                    check_limits(item.op.target, self._sysinfo(device.id))
                 except CommandRefused as exc:
                     refusal = exc
             if refusal is not None:
@@ -216,15 +219,44 @@ class CommandService:
                         for n, i in enumerate(items)]
         return tuple(ops)
 
+    def _path_device(self, machine: MachineConfig, path: int | None) -> MachineConfig:
+        """The device whose session reads and writes `path` of the control behind `machine` (path 1 is the
+        machine's own device, path n its `<id>-path<n>`); unknown_path beyond the configured paths."""
+        if path is None or path == machine.path:
+            return machine
+        parent = next((m for m in self.config.machines if any(d.id == machine.id for d in m.path_devices())),
+                      machine)
+        devices = parent.path_devices()
+        if path > len(devices):
+            raise CommandRefused(ErrorCode.UNKNOWN_PATH, f"path {path}: machine {parent.id!r} is configured with "
+                                 f"{parent.paths} path(s) (`paths: {parent.paths}`); nothing was written")
+        return devices[path - 1]
+
     async def _queue_and_wait(self, machine: MachineConfig, policy: WritePolicy,
-                              ops: list[WriteOp]) -> list[WriteResult]:
+                              routed: list[Routed]) -> list[WriteResult]:
+        """Admit the request, then run it in order: consecutive writes to one path as one job on that path's
+        queue; after a failure the rest is skipped."""
         try:
-            self._rate.admit(machine.id, len(ops), policy.rate_limit)
-            done = self._queue(machine.id).submit(ops)
+            self._rate.admit(machine.id, len(routed), policy.rate_limit)
         except CommandRefused as refusal:
             return [WriteResult.refused(op, refusal) if n == 0 else WriteResult.skipped(op, 0)
-                    for n, op in enumerate(ops)]
-        return await asyncio.shield(done)
+                    for n, (_device, op) in enumerate(routed)]
+        results: list[WriteResult] = []
+        for device_id, group in groupby(routed, key=lambda pair: pair[0].id):
+            ops = [op for _device, op in group]
+            failed = next((n for n, result in enumerate(results) if not result.ok), None)
+            if failed is not None:
+                results.extend(WriteResult.skipped(op, failed) for op in ops)
+                continue
+            try:
+                done = self._queue(device_id).submit(ops)
+            except CommandRefused as refusal:
+                first = len(results)
+                results.extend(WriteResult.refused(op, refusal) if n == 0 else WriteResult.skipped(op, first)
+                               for n, op in enumerate(ops))
+                continue
+            results.extend(await asyncio.shield(done))
+        return results
 
     def _queue(self, machine_id: str) -> MachineWriteQueue:
         queue = self._queues.get(machine_id)
@@ -249,7 +281,7 @@ class CommandService:
             time=utc_now(), machine=machine_id, source=source.format, topic=source.topic,
             client_id=item.client if item is not None else None,
             request_id=item.id if item is not None else None,
-            target=str(result.op.target) if result.op is not None else (item.target_text if item else None),
+            target=result.op.text if result.op is not None else (item.target_text if item else None),
             value=result.op.reply_value() if result.op is not None else (item.requested if item else None),
             old=result.old, new=result.read_back, outcome=result.outcome,
             message=result.note if result.ok else result.message))

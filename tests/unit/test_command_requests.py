@@ -141,3 +141,35 @@ def test_a_number_target_given_something_else_says_expected_a_number(target: str
     (first,) = parse_request(json.dumps({"target": target, "value": value}).encode(), 4096).items
     assert first.refused is not None and first.refused.code is ErrorCode.WRONG_TYPE
     assert "expected a number" in first.refused.message and "boolean" not in first.refused.message
+
+
+# ---- the CNC path of a write: `@N` in the target or a "path" field ----------------------------------------
+
+
+@pytest.mark.parametrize("body", [
+    {"target": "macro:500@2", "value": 1.5},
+    {"target": "macro:500", "path": 2, "value": 1.5},
+    {"target": "macro:500@2", "path": 2, "value": 1.5},
+])
+def test_a_write_names_its_path_in_the_target_or_a_path_field(body: dict[str, object]) -> None:
+    (item,) = parse_request(json.dumps(body).encode(), 4096).items
+    assert item.refused is None and item.op is not None
+    assert (item.op.target, item.op.path, item.op.text) == (MacroTarget(500, 500), 2, "macro:500@2")
+
+
+def test_a_write_without_a_path_names_none() -> None:
+    (item,) = parse_request(b'{"target": "pmc:R100.3", "value": 1}', 4096).items
+    assert item.op is not None and item.op.path is None and item.op.text == "pmc:R100.3"
+
+
+@pytest.mark.parametrize(("body", "code", "why"), [
+    ({"target": "macro:500@2", "path": 3, "value": 1}, ErrorCode.MALFORMED, "names path 2 but path is 3"),
+    ({"target": "macro:500@11", "value": 1}, ErrorCode.INVALID_TARGET, "path 11 is not 1..10"),
+    ({"target": "diag:980@2", "value": 1}, ErrorCode.INVALID_TARGET, "read-only"),
+    ({"target": "macro:500", "path": 0, "value": 1}, ErrorCode.MALFORMED, "path"),
+    ({"target": "macro:500", "path": "2", "value": 1}, ErrorCode.MALFORMED, "path"),
+])
+def test_a_bad_or_conflicting_path_is_refused(body: dict[str, object], code: ErrorCode, why: str) -> None:
+    (item,) = parse_request(json.dumps(body).encode(), 4096).items
+    assert item.op is None and item.refused is not None
+    assert item.refused.code is code and why in item.refused.message

@@ -18,6 +18,7 @@ from edge.targets import (
     parse_assignment,
     parse_target,
     parse_writable,
+    split_path,
 )
 
 
@@ -159,3 +160,39 @@ def test_near_grammar_strings_parse_or_raise_target_error(text: str) -> None:
     except TargetError:
         return
     assert parse_target(str(target)) == target
+
+
+# ---- `@N`: the CNC path a target names ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("text", "bare", "path"), [
+    ("macro:500@2", "macro:500", 2),
+    ("pmc:R100.3@2", "pmc:R100.3", 2),
+    ("param:1825/1@2", "param:1825/1", 2),
+    ("program@10", "program", 10),
+    ("macro:500 @ 2", "macro:500", 2),
+    ("macro:500", "macro:500", None),
+])
+def test_split_path_takes_the_path_suffix_off(text: str, bare: str, path: int | None) -> None:
+    assert split_path(text) == (bare, path)
+    parse_target(split_path(text)[0])  # what is left is the usual grammar
+
+
+@pytest.mark.parametrize(("text", "why"), [
+    ("macro:500@0", "path 0 is not 1..10"),
+    ("macro:500@11", "path 11 is not 1..10"),
+    ("macro:500@two", "expected TARGET@PATH"),
+    ("macro:500@2@3", "expected TARGET@PATH"),
+    ("macro:500@", "expected TARGET@PATH"),
+])
+def test_a_bad_path_suffix_is_refused_naming_the_target(text: str, why: str) -> None:
+    with pytest.raises(TargetError, match=why) as caught:
+        split_path(text)
+    assert repr(text) in str(caught.value)
+
+
+@given(st.sampled_from(["macro:500", "pmc:R100.3", "pmc:D2204-D2207.word", "param:1825/1", "param:6711/0.2",
+                        "diag:980", "program"]), st.integers(1, 10))
+def test_any_target_with_a_path_suffix_splits_back(text: str, path: int) -> None:
+    assert split_path(f"{text}@{path}") == (text, path)
+    assert str(parse_target(text)) == str(parse_target(split_path(f"{text}@{path}")[0]))
