@@ -39,6 +39,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help=f"connect and per-request timeout (default {DEFAULT_TIMEOUT:g})")
     parser.add_argument("--output", "-o", default="-", metavar="FILE", help="where to write (default: stdout)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    parser.add_argument("--units", metavar="DIR",
+                        help="also write the systemd units and drop-ins the package carries into DIR (e.g. for a "
+                             "pip install: then `systemctl link` them or copy them to /etc/systemd/system)")
     parser.set_defaults(func=handle)
 
 
@@ -97,6 +100,14 @@ def handle(args: argparse.Namespace) -> int:
     output = None if args.output == "-" else Path(args.output)
     if output is not None and output.exists() and not args.force:
         return _usage(f"{output} exists; use --force to overwrite it")
+    if args.units is not None:
+        from edge.bundle import write_bundled
+
+        try:
+            units = write_bundled("systemd", Path(args.units), overwrite=args.force)
+        except (FileExistsError, OSError) as exc:
+            return _usage(f"--units {args.units}: {exc}")
+        print(f"wrote {', '.join(u.name for u in units)} to {args.units}", file=sys.stderr)
     try:
         ids = _ids(args)
         broker_host, broker_port = _broker(args.broker)

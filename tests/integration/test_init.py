@@ -83,3 +83,16 @@ def test_an_existing_file_is_not_overwritten_without_force(tmp_path: Path) -> No
     out.write_text("mine\n")
     assert main(["init", "127.0.0.1:1", "-o", str(out)]) == EXIT_USAGE
     assert out.read_text() == "mine\n"
+
+
+def test_init_writes_the_bundled_units_out_too(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    units = tmp_path / "units"
+    repo_units = Path(__file__).resolve().parents[2] / "systemd"
+    with FleetThread(Fleet([MachineSpec(profile="16i")], base_port=0)) as fleet:
+        args = ["init", f"127.0.0.1:{fleet[0].port}", "--units", str(units), "-o", str(tmp_path / "edge.yaml")]
+        assert main(args) == EXIT_OK, capsys.readouterr().err
+        assert {f.name: f.read_bytes() for f in units.iterdir()} == \
+            {f.name: f.read_bytes() for f in repo_units.iterdir() if f.is_file()}
+        assert "focas-edge.service" in {f.name for f in units.iterdir()}
+        assert main(args) == EXIT_USAGE, "the units are not overwritten without --force"
+        assert "use --force" in capsys.readouterr().err
