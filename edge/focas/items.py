@@ -179,6 +179,14 @@ class ReadToolOffsets(ReadItem):
 
 
 @dataclass(frozen=True, slots=True)
+class ReadWorkOffsets(ReadItem):
+    """-> list[float | None] per controlled axis of one work offset (cnc_rdzofs number: 0 external,
+    1..6 G54..G59). Vendor library only: the native protocol has no public wire form for it."""
+
+    number: int = 1
+
+
+@dataclass(frozen=True, slots=True)
 class ReadOperatorMessages(ReadItem):
     """-> list[OperatorMessage] (the first message only on the native transport)"""
 

@@ -73,6 +73,7 @@ class Command(enum.IntEnum):
     ACTS = 0x400A  # cnc_acts: actual spindle speed
     RDAXISNAME = 0x400B  # cnc_rdaxisname: axis names
     RDTIMER = 0x400C  # cnc_rdtimer: minutes + milliseconds
+    RDZOFS = 0x400D  # cnc_rdzofs: one work-coordinate offset, every axis (IODBZOFS)
 
 
 # Ids another implementation of the surface uses with a layout we do not know; never assign them.
@@ -99,6 +100,7 @@ FOCAS_NAMES: dict[Command, str] = {
     Command.ACTS: "cnc_acts",
     Command.RDAXISNAME: "cnc_rdaxisname",
     Command.RDTIMER: "cnc_rdtimer",
+    Command.RDZOFS: "cnc_rdzofs",
 }
 
 
@@ -765,3 +767,22 @@ def decode_axis_names_response(payload: bytes) -> list[str]:
         raw[i : i + AXIS_NAME_WIDTH].rstrip(b"\x00").decode("ascii", errors="replace")
         for i in range(0, len(raw), AXIS_NAME_WIDTH)
     ]
+
+
+# ---- work-coordinate offsets (0x400D) ------------------------------------------------------------------
+# cnc_rdzofs numbers them 0 (external), 1..6 (G54..G59), 7.. (G54.1 P1 ...). The request is one i16 offset
+# number; the answer is encode_floats' i16 count + f64 per controlled axis (fwlib32.h: IODBZOFS, type -1).
+WORK_OFFSET_FIRST_G = 54  # offset number 1 is G54
+
+
+def work_offset_number(g_code: int) -> int:
+    """cnc_rdzofs's offset number for G54..G59 (0 stays the external offset); ValueError otherwise."""
+    if g_code == 0:
+        return 0
+    if not WORK_OFFSET_FIRST_G <= g_code <= WORK_OFFSET_FIRST_G + 5:
+        raise ValueError(f"work offset G{g_code}: expected 54..59 (or 0 for the external offset)")
+    return g_code - WORK_OFFSET_FIRST_G + 1
+
+
+def decode_work_offsets_response(payload: bytes) -> list[float | None]:
+    return decode_floats_response(payload, Command.RDZOFS)

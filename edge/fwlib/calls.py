@@ -65,6 +65,8 @@ class LibraryCnc:
     handle: int
     param_types: dict[int, ParamType] = field(default_factory=dict)
     diag_types: dict[int, ParamType] = field(default_factory=dict)
+    input_decimals: int = 3  # cnc_rdzofs answers integers in the least input increment (configured)
+    axis_count: int | None = None  # controlled axes, from cnc_sysinfo's `axes`; None until read
     history_version: int | None = None  # the cnc_rdalmhistryN this control answered; None until tried
     lost_code: int = 0  # the negative EW_* code that said the handle is gone (the worker reconnects)
 
@@ -340,6 +342,26 @@ def _gettime(cnc: LibraryCnc, payload: bytes) -> bytes:
     return pk.read_response(struct.pack("<6h", *fields))
 
 
+def _axis_count(cnc: LibraryCnc) -> int:
+    """Controlled axes (ODBSYS.axes, two ASCII digits), read once per handle; at most MAX_AXIS."""
+    if cnc.axis_count is None:
+        info = st.ODBSYS()
+        cnc.call("cnc_sysinfo", ctypes.byref(info))
+        digits = _text(info.axes).strip()
+        cnc.axis_count = max(0, min(int(digits), st.MAX_AXIS)) if digits.isdigit() else st.MAX_AXIS
+    return cnc.axis_count
+
+
+def _rdzofs(cnc: LibraryCnc, payload: bytes) -> bytes:
+    """One work offset for every axis (type -1); integers in the least input increment become mm/inch."""
+    number = pk.decode_i16_request(payload, "cnc_rdzofs request")
+    axes = _axis_count(cnc)
+    zofs = st.IODBZOFS()
+    length = st.IODBZOFS.data.offset + axes * ctypes.sizeof(zofs.data[0])
+    cnc.call("cnc_rdzofs", number, -1, length, ctypes.byref(zofs))
+    return pk.read_response(pk.encode_floats([pk.from_scaled(v, cnc.input_decimals) for v in zofs.data[:axes]]))
+
+
 TRANSLATIONS: dict[int, Translation] = {
     pk.Command.SYSINFO: _sysinfo,
     pk.Command.RDCNCSTAT: _statinfo,
@@ -356,6 +378,7 @@ TRANSLATIONS: dict[int, Translation] = {
     pk.Command.ACTF: _act("cnc_actf"),
     pk.Command.ACTS: _act("cnc_acts"),
     pk.Command.GETTIME: _gettime,
+    pk.Command.RDZOFS: _rdzofs,
 }
 
 

@@ -56,6 +56,7 @@ from edge.focas.model import (
 from edge.sim.profiles import Profile, get_profile
 
 TOOL_OFFSET_COUNT = 64  # offsets the simulated control keeps per kind
+WORK_OFFSET_COUNT = 6  # G54..G59 (number 0, the external offset, exists too)
 LOAD_BLANK_MESSAGE = 2001  # the operator message shown between parts
 
 MACRO_RANGES = ((100, 199), (500, 999))  # common (volatile) and common (kept) variables
@@ -478,6 +479,15 @@ class MachineState:
         bases = ((100.0, 2.5), (0.0, -0.002), (5.0, 0.5), (0.0, 0.001))
         base, step = bases[kind]
         return [round(base + step * n, 4) for n in range(first, last + 1)]
+
+    def work_offsets(self, number: int) -> list[float]:
+        """Work-coordinate offset `number` (0 external, 1..6 G54..G59) for every controlled axis."""
+        if not 0 <= number <= WORK_OFFSET_COUNT:
+            raise cnc_error(EW_NUMBER, "cnc_rdzofs",
+                            message=f"work offset {number} is outside 0..{WORK_OFFSET_COUNT}")
+        if number == 0:
+            return [0.0] * self.profile.axis_count
+        return [round(-100.0 * (index + 1) - 10.0 * number - 0.125, 3) for index in range(self.profile.axis_count)]
 
     def program_directory(self, start: int = 1, count: int = 19) -> list[ProgramDirEntry]:
         """Programs numbered >= start, at most count of them (an empty list past the last)."""

@@ -42,6 +42,7 @@ typedef struct iodbtimer {
         struct { short hour; short minute; short second; } time;
     } data;
 } IODBTIMER;
+typedef struct iodbzofs { short datano; short type; long data[MAX_AXIS]; } IODBZOFS;
 typedef struct odbahis2 {
     unsigned short s_no; unsigned short e_no;
     struct {
@@ -140,6 +141,9 @@ typedef struct odbahis4 {
     X(IODBTIMER, "data.time.hour", data.time.hour) \
     X(IODBTIMER, "data.time.minute", data.time.minute) \
     X(IODBTIMER, "data.time.second", data.time.second) \
+    X(IODBZOFS, "datano", datano) \
+    X(IODBZOFS, "type", type) \
+    X(IODBZOFS, "data", data) \
     X(ODBAHIS2, "s_no", s_no) \
     X(ODBAHIS2, "e_no", e_no) \
     X(ODBAHIS2, "alm_his", alm_his) \
@@ -161,6 +165,6 @@ typedef struct odbahis4 {
     X(ODBAHIS4, "alm_his.alm_msg", alm_his[0].alm_msg)
 
 /* S(type) for every struct the library calls take */
-#define FWLIB_STRUCTS(S) S(ODBSYS) S(ODBST) S(REALPRM) S(IODBPSD) S(ODBM) S(IODBPMC) S(ODBALM) S(ODBALMMSG) S(ODBACT) S(IODBTIMER) S(ODBAHIS2) S(ODBAHIS3) S(ODBAHIS4)
+#define FWLIB_STRUCTS(S) S(ODBSYS) S(ODBST) S(REALPRM) S(IODBPSD) S(ODBM) S(IODBPMC) S(ODBALM) S(ODBALMMSG) S(ODBACT) S(IODBTIMER) S(IODBZOFS) S(ODBAHIS2) S(ODBAHIS3) S(ODBAHIS4)
 
 #endif

@@ -1,0 +1,76 @@
+"""Work-coordinate offsets (cnc_rdzofs): the packed ext layout, its simulator answer and the native refusal."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from edge.focas import items as it
+from edge.focas import native
+from edge.focas import packed as pk
+from edge.focas import packed_client
+from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
+from edge.focas.functions import Context
+from edge.focas.values import SlotForm
+from edge.sim import packed_server
+from edge.sim.state import MachineState
+
+CTX = Context(max_axis=8, slot_form=SlotForm.FOUR_BYTE)
+
+
+def test_rdzofs_takes_the_next_free_ext_id_and_its_focas_name() -> None:
+    assert pk.Command.RDZOFS == 0x400D
+    assert pk.command_name(0x400D) == "cnc_rdzofs"
+
+
+def test_request_is_one_i16_and_answer_is_count_then_f64_per_axis() -> None:
+    plan = packed_client.plan_item(it.ReadWorkOffsets(2))
+    assert plan.requests == [(pk.Command.RDZOFS, bytes.fromhex("0200"))]
+    wire = pk.read_response(pk.encode_floats([-110.125, 2.5]))
+    assert wire == bytes.fromhex("0000" "0200") + bytes.fromhex("0000000000885bc0") + bytes.fromhex("0000000000000440")
+    assert plan.combine([wire]) == [-110.125, 2.5]
+
+
+def test_a_short_or_failed_answer_raises() -> None:
+    with pytest.raises(ProtocolError):
+        pk.decode_work_offsets_response(bytes.fromhex("0000" "0300") + bytes(16))
+    with pytest.raises(OutOfRange):
+        pk.decode_work_offsets_response(pk.encode_status(3))
+
+
+@given(st.lists(st.one_of(st.none(), st.floats(allow_nan=False)), max_size=32))
+def test_property_work_offsets_round_trip(values: list[float | None]) -> None:
+    assert pk.decode_work_offsets_response(pk.read_response(pk.encode_floats(values))) == values
+
+
+@given(st.binary(max_size=300))
+def test_property_decoder_raises_only_typed_errors(payload: bytes) -> None:
+    try:
+        result = pk.decode_work_offsets_response(payload)
+    except (ProtocolError, CncError):
+        return
+    assert all(v is None or not math.isnan(v) for v in result)
+
+
+def test_g_codes_map_to_cnc_rdzofs_numbers() -> None:
+    assert [pk.work_offset_number(g) for g in (0, 54, 59)] == [0, 1, 6]
+    with pytest.raises(ValueError, match="G60"):
+        pk.work_offset_number(60)
+
+
+def test_native_transport_reports_not_supported_rather_than_guessing_a_wire_form() -> None:
+    result = native.item_result(native.plan_item(it.ReadWorkOffsets(1), CTX), [], CTX)
+    assert isinstance(result, NotSupported) and "no public" in str(result)
+
+
+def test_simulator_packed_server_answers_one_value_per_axis_and_refuses_a_bad_number() -> None:
+    state = MachineState()
+    answer = packed_server.answer(state, pk.Command.RDZOFS, pk.encode_i16(1))
+    offsets = pk.decode_work_offsets_response(answer)
+    assert len(offsets) == state.profile.axis_count
+    assert offsets == state.work_offsets(1) and offsets != state.work_offsets(2)
+    with pytest.raises(OutOfRange):
+        pk.decode_work_offsets_response(packed_server.answer(state, pk.Command.RDZOFS, pk.encode_i16(99)))
