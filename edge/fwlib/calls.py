@@ -357,7 +357,7 @@ def _rdzofs(cnc: LibraryCnc, payload: bytes) -> bytes:
     number = pk.decode_i16_request(payload, "cnc_rdzofs request")
     axes = _axis_count(cnc)
     zofs = st.IODBZOFS()
-    length = st.IODBZOFS.data.offset + axes * ctypes.sizeof(zofs.data[0])
+    length = st.IODBZOFS.data.offset + axes * (st.IODBZOFS.data.size // st.MAX_AXIS)
     cnc.call("cnc_rdzofs", number, -1, length, ctypes.byref(zofs))
     return pk.read_response(pk.encode_floats([pk.from_scaled(v, cnc.input_decimals) for v in zofs.data[:axes]]))
 
