@@ -9,9 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.focas import items as it
-from edge.focas import native
+from edge.focas import native, packed_client
 from edge.focas import packed as pk
-from edge.focas import packed_client
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
 from edge.focas.values import SlotForm
