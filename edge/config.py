@@ -524,6 +524,9 @@ class PollPlan(_Model):
     timers: bool = True  # Times/PowerOn, Operating, Cutting, Cycle (0x120), counters period
     operator_messages: bool = True  # Message/Operator (0x34), status group
     tool_offsets: int = Field(default=0, ge=0, le=MAX_TOOL_OFFSETS)  # offsets 1..n of each kind (0x08), counters
+    # G54..G59 work-coordinate offsets to publish as WorkOffset/G5x/<axis> (cnc_rdzofs: FOCAS library
+    # host only, no public wire form), counters period
+    work_offsets: list[int] = Field(default_factory=list)
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
@@ -537,6 +540,16 @@ class PollPlan(_Model):
         assert set(value) <= set(POSITION_KINDS)
         if len(set(value)) != len(value):
             raise ValueError(f"{value}: a position kind is listed twice")
+        return value
+
+    @field_validator("work_offsets")
+    @classmethod
+    def _work_offset_codes(cls, value: list[int]) -> list[int]:
+        bad = [g for g in value if not 54 <= g <= 59]
+        if bad:
+            raise ValueError(f"work offset G{bad[0]}: expected G codes 54..59, e.g. [54, 55]")
+        if len(set(value)) != len(value):
+            raise ValueError(f"{value}: a work offset is listed twice")
         return value
 
     @model_validator(mode="after")

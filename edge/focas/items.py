@@ -186,6 +186,16 @@ class ReadWorkOffsets(ReadItem):
     number: int = 1
 
 
+WORK_OFFSET_FIRST_G = 54  # cnc_rdzofs offset number 1 is G54
+
+
+def work_offset_number(g_code: int) -> int:
+    """cnc_rdzofs's offset number for G54..G59; ValueError for any other G code."""
+    if not WORK_OFFSET_FIRST_G <= g_code <= WORK_OFFSET_FIRST_G + 5:
+        raise ValueError(f"work offset G{g_code}: expected 54..59")
+    return g_code - WORK_OFFSET_FIRST_G + 1
+
+
 @dataclass(frozen=True, slots=True)
 class ReadOperatorMessages(ReadItem):
     """-> list[OperatorMessage] (the first message only on the native transport)"""

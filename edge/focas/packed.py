@@ -770,18 +770,8 @@ def decode_axis_names_response(payload: bytes) -> list[str]:
 
 
 # ---- work-coordinate offsets (0x400D) ------------------------------------------------------------------
-# cnc_rdzofs numbers them 0 (external), 1..6 (G54..G59), 7.. (G54.1 P1 ...). The request is one i16 offset
-# number; the answer is encode_floats' i16 count + f64 per controlled axis (fwlib32.h: IODBZOFS, type -1).
-WORK_OFFSET_FIRST_G = 54  # offset number 1 is G54
-
-
-def work_offset_number(g_code: int) -> int:
-    """cnc_rdzofs's offset number for G54..G59 (0 stays the external offset); ValueError otherwise."""
-    if g_code == 0:
-        return 0
-    if not WORK_OFFSET_FIRST_G <= g_code <= WORK_OFFSET_FIRST_G + 5:
-        raise ValueError(f"work offset G{g_code}: expected 54..59 (or 0 for the external offset)")
-    return g_code - WORK_OFFSET_FIRST_G + 1
+# The request is one i16 offset number (cnc_rdzofs: 0 external, 1..6 G54..G59); the answer is encode_floats'
+# i16 count + one f64 per controlled axis (the library host reads IODBZOFS with type -1, every axis).
 
 
 def decode_work_offsets_response(payload: bytes) -> list[float | None]:

@@ -8,6 +8,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from edge import ConfigError
+from edge.collect.plan import Group, MachinePlan, StaticInfo, drop_key, metric_values
+from edge.config import parse_config
 from edge.focas import items as it
 from edge.focas import native, packed_client
 from edge.focas import packed as pk
@@ -15,6 +18,7 @@ from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
 from edge.focas.values import SlotForm
 from edge.sim import packed_server
+from edge.samples import MetricType
 from edge.sim.state import MachineState
 
 CTX = Context(max_axis=8, slot_form=SlotForm.FOUR_BYTE)
@@ -55,9 +59,9 @@ def test_property_decoder_raises_only_typed_errors(payload: bytes) -> None:
 
 
 def test_g_codes_map_to_cnc_rdzofs_numbers() -> None:
-    assert [pk.work_offset_number(g) for g in (0, 54, 59)] == [0, 1, 6]
+    assert [it.work_offset_number(g) for g in (54, 59)] == [1, 6]
     with pytest.raises(ValueError, match="G60"):
-        pk.work_offset_number(60)
+        it.work_offset_number(60)
 
 
 def test_native_transport_reports_not_supported_rather_than_guessing_a_wire_form() -> None:
@@ -73,3 +77,37 @@ def test_simulator_packed_server_answers_one_value_per_axis_and_refuses_a_bad_nu
     assert offsets == state.work_offsets(1) and offsets != state.work_offsets(2)
     with pytest.raises(OutOfRange):
         pk.decode_work_offsets_response(packed_server.answer(state, pk.Command.RDZOFS, pk.encode_i16(99)))
+
+
+# ---- the poll plan: opt-in, counters period, one Double per axis, dropped per offset ------------------------
+WORK_OFFSET_CONFIG = """
+mqtt: {host: b, formats: [json]}
+machines:
+  - id: m1
+    host: h
+    poll: {work_offsets: [54, 56]}
+"""
+
+
+def test_work_offsets_are_opt_in_and_publish_one_double_per_axis_at_the_counters_period() -> None:
+    static = StaticInfo(axis_names=("X", "Y", "B"))
+    config = parse_config(WORK_OFFSET_CONFIG, "t", {})
+    plan = MachinePlan.build(config.machines[0], config.alarms, static)
+    reads = [r for r in plan.reads if isinstance(r.item, it.ReadWorkOffsets)]
+    assert [r.item for r in reads] == [it.ReadWorkOffsets(1), it.ReadWorkOffsets(3)]
+    assert {r.group for r in reads} == {Group.COUNTERS}
+    assert [(s.name, s.type, s.unit) for s in reads[0].metrics] == [
+        ("WorkOffset/G54/X", MetricType.DOUBLE, "mm"), ("WorkOffset/G54/Y", MetricType.DOUBLE, "mm"),
+        ("WorkOffset/G54/B", MetricType.DOUBLE, "deg")]
+    assert [v for _, v in metric_values(reads[1], [1.5, -2.0, 90.0])] == [1.5, -2.0, 90.0]
+    assert [r.item for r in plan.without(drop_key(reads[0].item)).reads
+            if isinstance(r.item, it.ReadWorkOffsets)] == [it.ReadWorkOffsets(3)]
+    default = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "timers: true"), "t", {})
+    assert not any(isinstance(r.item, it.ReadWorkOffsets)
+                   for r in MachinePlan.build(default.machines[0], default.alarms, static).reads)
+
+
+@pytest.mark.parametrize("codes", ["[53]", "[60]", "[54, 54]"])
+def test_a_work_offset_outside_g54_to_g59_or_twice_is_a_config_error_naming_it(codes: str) -> None:
+    with pytest.raises(ConfigError, match="work_offsets"):
+        parse_config(WORK_OFFSET_CONFIG.replace("[54, 56]", codes), "t", {})
