@@ -17,8 +17,8 @@ from edge.focas import packed as pk
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
 from edge.focas.values import SlotForm
-from edge.sim import packed_server
 from edge.samples import MetricType
+from edge.sim import packed_server
 from edge.sim.state import MachineState
 
 CTX = Context(max_axis=8, slot_form=SlotForm.FOUR_BYTE)
