@@ -186,6 +186,17 @@ class ReadWorkOffsets(ReadItem):
     number: int = 1
 
 
+@dataclass(frozen=True, slots=True)
+class ReadModalGCodes(ReadItem):
+    """-> list[ModalGCode] of the active block, every modal group (cnc_rdgcode type -1, block 1).
+    Vendor library only: no public wire form."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReadToolNumber(ReadItem):
+    """-> int, the T code in use (cnc_modal type 108, active block). Vendor library only: no public wire form."""
+
+
 WORK_OFFSET_FIRST_G = 54  # cnc_rdzofs offset number 1 is G54
 
 

@@ -38,6 +38,7 @@ from edge.focas.errors import (
 from edge.focas.model import (
     ActiveAlarm,
     AlarmHistoryEntry,
+    ModalGCode,
     ParamRecord,
     ParamType,
     PmcType,
@@ -74,6 +75,8 @@ class Command(enum.IntEnum):
     RDAXISNAME = 0x400B  # cnc_rdaxisname: axis names
     RDTIMER = 0x400C  # cnc_rdtimer: minutes + milliseconds
     RDZOFS = 0x400D  # cnc_rdzofs: one work-coordinate offset, every axis (IODBZOFS)
+    RDGCODE = 0x400E  # cnc_rdgcode: modal G codes of the active block (ODBGCD)
+    RDTOOLNUM = 0x400F  # cnc_modal type 108: the T code in use (ODBMDL aux)
 
 
 # Ids another implementation of the surface uses with a layout we do not know; never assign them.
@@ -101,6 +104,8 @@ FOCAS_NAMES: dict[Command, str] = {
     Command.RDAXISNAME: "cnc_rdaxisname",
     Command.RDTIMER: "cnc_rdtimer",
     Command.RDZOFS: "cnc_rdzofs",
+    Command.RDGCODE: "cnc_rdgcode",
+    Command.RDTOOLNUM: "cnc_modal",
 }
 
 
@@ -776,3 +781,35 @@ def decode_axis_names_response(payload: bytes) -> list[str]:
 
 def decode_work_offsets_response(payload: bytes) -> list[float | None]:
     return decode_floats_response(payload, Command.RDZOFS)
+
+
+# ---- modal G codes (0x400E) ------------------------------------------------------------------------------
+# Empty request. Answer: i16 count, then count x (i16 group, 8-byte ASCII code NUL-padded): ODBGCD minus flag.
+G_CODE_WIDTH = 8
+_GCODE_HEAD = struct.Struct("<h")
+
+
+def encode_modal_g_codes(codes: Sequence[ModalGCode]) -> bytes:
+    return _I16.pack(len(codes)) + b"".join(
+        _GCODE_HEAD.pack(c.group) + c.code.encode("ascii", errors="replace")[:G_CODE_WIDTH].ljust(G_CODE_WIDTH, b"\x00")
+        for c in codes)
+
+
+def decode_modal_g_codes_response(payload: bytes) -> list[ModalGCode]:
+    body = _body_after_status(payload, Command.RDGCODE)
+    if len(body) < 2:
+        raise ProtocolError(f"cnc_rdgcode: expected an i16 count, got {len(body)} bytes")
+    (count,) = _I16.unpack_from(body)
+    entry = _GCODE_HEAD.size + G_CODE_WIDTH
+    _expect_length(body, 2 + entry * max(count, 0), f"cnc_rdgcode with {count} codes")
+    codes = []
+    for at in range(2, len(body), entry):
+        (group,) = _GCODE_HEAD.unpack_from(body, at)
+        raw = body[at + _GCODE_HEAD.size : at + entry]
+        codes.append(ModalGCode(group, raw.rstrip(b"\x00").decode("ascii", errors="replace")))
+    return codes
+
+
+# ---- T code in use (0x400F): empty request, answer i32 (encode_int32) ------------------------------------
+def decode_tool_number_response(payload: bytes) -> int:
+    return decode_int32_response(payload, Command.RDTOOLNUM)

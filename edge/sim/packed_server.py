@@ -156,6 +156,8 @@ HANDLERS: dict[int, Handler] = {
     pk.Command.RDAXISNAME: lambda s, _: pk.read_response(pk.encode_axis_names(s.axis_names())),
     pk.Command.RDTIMER: _timer,
     pk.Command.RDZOFS: _work_offsets,
+    pk.Command.RDGCODE: lambda s, _: pk.read_response(pk.encode_modal_g_codes(s.modal_g_codes())),
+    pk.Command.RDTOOLNUM: lambda s, _: pk.read_response(pk.encode_int32(s.tool_number())),
 }
 
 

@@ -43,6 +43,7 @@ from edge.focas.model import (
     ActiveAlarm,
     AlarmHistoryEntry,
     ExecProgram,
+    ModalGCode,
     OperatorMessage,
     ParamRecord,
     ParamType,
@@ -454,6 +455,20 @@ class MachineState:
         with self._lock:
             cutting, into = self._phase_at(self._cycle_time())
             return 10 + 10 * int(40 * into / self.cycle.cut_seconds) if cutting else 0
+
+    def modal_g_codes(self) -> list[ModalGCode]:
+        """The active block's modal G codes (cnc_rdgcode groups as the library indexes them, 0 = motion):
+        G01 while cutting, G00 between parts; the rest fixed (plane, absolute, mm/min, metric, G54)."""
+        with self._lock:
+            cutting, _ = self._phase_at(self._cycle_time())
+        fixed = ((1, "G17"), (2, "G90"), (4, "G94"), (5, "G21"), (6, "G40"), (7, "G49"), (8, "G80"), (13, "G54"))
+        return [ModalGCode(0, "G01" if cutting else "G00"), *(ModalGCode(g, code) for g, code in fixed)]
+
+    def tool_number(self) -> int:
+        """The T code in use: one tool per quarter of the cut (T1..T4), the first tool between parts."""
+        with self._lock:
+            cutting, into = self._phase_at(self._cycle_time())
+            return 1 + min(3, int(4 * into / self.cycle.cut_seconds)) if cutting else 1
 
     def exec_program(self) -> ExecProgram:
         number = self.cycle.program_number

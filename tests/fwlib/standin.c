@@ -80,6 +80,10 @@ static int calls_rdpmcrng, calls_wrpmcrng, calls_allclibhndl3;
 static short last_wrpmc_start, last_wrpmc_end;
 static long work_offsets[WORK_OFFSETS][STANDIN_AXES]; /* in the least input increment */
 static int calls_rdzofs;
+static long tool_in_use;
+#define GCODE_GROUPS 4
+static const char *const gcodes[GCODE_GROUPS] = {"G01", "G17", "G90", "G54"};
+static const short gcode_groups[GCODE_GROUPS] = {0, 1, 2, 13};
 static short last_rdzofs_length;
 
 void standin_reset(void) {
@@ -88,7 +92,7 @@ void standin_reset(void) {
     memset(pmc, 0, sizeof(pmc));
     pwe = 1; history_version = 4; refuse_connects = 0; hang_macro = -1; released = 0;
     calls_rdpmcrng = calls_wrpmcrng = calls_allclibhndl3 = calls_rdzofs = 0;
-    memset(work_offsets, 0, sizeof(work_offsets)); last_rdzofs_length = 0;
+    memset(work_offsets, 0, sizeof(work_offsets)); last_rdzofs_length = 0; tool_in_use = 0;
     pthread_mutex_unlock(&lock);
 }
 void standin_set_param(short number, short type, long value, long dec) {
@@ -119,6 +123,7 @@ void standin_set_work_offset(short number, short axis, long value) {
     if (number >= 0 && number < WORK_OFFSETS && axis >= 1 && axis <= STANDIN_AXES) work_offsets[number][axis - 1] = value;
 }
 short standin_last_rdzofs_length(void) { return last_rdzofs_length; }
+void standin_set_tool(long t) { tool_in_use = t; }
 int standin_started_up(void) { return started_up; }
 /* Every handle handed out so far now answers EW_HANDLE, as after the CNC dropped the connection. */
 void standin_drop_handles(void) {
@@ -354,6 +359,28 @@ short cnc_rdzofs(unsigned short h, short number, short axis, short length, IODBZ
     if (length < (short)(offsetof(IODBZOFS, data) + count * sizeof(long))) return EW_LENGTH;
     out->datano = number; out->type = axis;
     for (int i = 0; i < count; i++) out->data[i] = work_offsets[number][axis == -1 ? i : axis - 1];
+    return EW_OK;
+}
+/* type -1 (every group), block 1 (active): *num in = room in out[], out = codes written */
+short cnc_rdgcode(unsigned short h, short type, short block, short *num, ODBGCD *out) {
+    CHECK_HANDLE(h);
+    if (type != -1 || block != 1) return EW_ATTRIB;
+    if (*num < GCODE_GROUPS) return EW_LENGTH;
+    for (int i = 0; i < GCODE_GROUPS; i++) {
+        memset(&out[i], 0, sizeof(out[i]));
+        out[i].group = gcode_groups[i];
+        strncpy(out[i].code, gcodes[i], sizeof(out[i].code));
+    }
+    *num = GCODE_GROUPS;
+    return EW_OK;
+}
+/* type 108 (T code), block 0 (active) only */
+short cnc_modal(unsigned short h, short type, short block, ODBMDL *out) {
+    CHECK_HANDLE(h);
+    if (type != 108 || block != 0) return EW_ATTRIB;
+    memset(out, 0, sizeof(*out));
+    out->datano = type; out->type = block;
+    out->modal.aux.aux_data = tool_in_use; out->modal.aux.flag1 = 1;
     return EW_OK;
 }
 short cnc_gettimer(unsigned short h, IODBTIMER *io) {
