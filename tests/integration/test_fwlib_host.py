@@ -22,6 +22,7 @@ import pytest
 from edge.focas import items as it
 from edge.focas import packed as pk
 from edge.focas.errors import AccessDenied, CncError, OutOfRange
+from edge.focas.model import ModalGCode
 from edge.focas.packed_client import PackedClient
 from edge.focas.packed_frame import FrameDecoder, PackedFrame
 from edge.fwlib import structs as st
@@ -384,3 +385,16 @@ async def test_work_offset_travels_as_least_increments_and_arrives_in_mm(standin
 async def test_a_work_offset_the_control_lacks_is_its_error_not_a_value(cnc: PackedClient) -> None:
     with pytest.raises(OutOfRange, match="cnc_rdzofs"):
         await cnc.read(it.ReadWorkOffsets(42))
+
+
+# ---- modal G codes (cnc_rdgcode, ext 0x400E) and the T code in use (cnc_modal, ext 0x400F) ---------------
+async def test_modal_g_codes_of_the_active_block_come_through_the_library(cnc: PackedClient) -> None:
+    assert await cnc.read(it.ReadModalGCodes()) == [
+        ModalGCode(0, "G01"), ModalGCode(1, "G17"), ModalGCode(2, "G90"), ModalGCode(13, "G54")]
+
+
+async def test_tool_number_in_use_is_cnc_modals_t_code(standin: Standin, cnc: PackedClient) -> None:
+    standin.set_tool(12)
+    assert await cnc.read(it.ReadToolNumber()) == 12
+    standin.set_tool(7)
+    assert await cnc.read(it.ReadToolNumber()) == 7

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import pytest
@@ -16,6 +17,7 @@ from edge.focas import native, packed_client
 from edge.focas import packed as pk
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
+from edge.focas.model import ModalGCode
 from edge.focas.values import SlotForm
 from edge.samples import MetricType
 from edge.sim import packed_server
@@ -111,3 +113,55 @@ def test_work_offsets_are_opt_in_and_publish_one_double_per_axis_at_the_counters
 def test_a_work_offset_outside_g54_to_g59_or_twice_is_a_config_error_naming_it(codes: str) -> None:
     with pytest.raises(ConfigError, match="work_offsets"):
         parse_config(WORK_OFFSET_CONFIG.replace("[54, 56]", codes), "t", {})
+
+
+# ---- modal G codes (0x400E) and the T code in use (0x400F) ------------------------------------------------
+def test_modal_and_tool_take_the_next_ext_ids_with_their_focas_names() -> None:
+    assert (pk.Command.RDGCODE, pk.Command.RDTOOLNUM) == (0x400E, 0x400F)
+    assert (pk.command_name(0x400E), pk.command_name(0x400F)) == ("cnc_rdgcode", "cnc_modal")
+
+
+def test_modal_g_codes_are_count_then_group_and_8_byte_code() -> None:
+    wire = pk.encode_modal_g_codes([ModalGCode(0, "G01"), ModalGCode(13, "G54.1")])
+    assert wire == (bytes.fromhex("0200" "0000") + b"G01\x00\x00\x00\x00\x00"
+                    + bytes.fromhex("0d00") + b"G54.1\x00\x00\x00")
+    plan = packed_client.plan_item(it.ReadModalGCodes())
+    assert plan.requests == [(pk.Command.RDGCODE, b"")]
+    assert plan.combine([pk.read_response(wire)]) == [ModalGCode(0, "G01"), ModalGCode(13, "G54.1")]
+    with pytest.raises(ProtocolError):
+        pk.decode_modal_g_codes_response(pk.read_response(wire[:-1]))
+
+
+def test_tool_number_is_one_i32() -> None:
+    plan = packed_client.plan_item(it.ReadToolNumber())
+    assert plan.requests == [(pk.Command.RDTOOLNUM, b"")]
+    assert plan.combine([pk.read_response(bytes.fromhex("0c000000"))]) == 12
+
+
+g_codes = st.builds(ModalGCode, st.integers(-(2**15), 2**15 - 1),
+                    st.text(alphabet="GM0123456789.", min_size=1, max_size=pk.G_CODE_WIDTH))
+
+
+@given(st.lists(g_codes, max_size=40))
+def test_property_modal_g_codes_round_trip(codes: list[ModalGCode]) -> None:
+    assert pk.decode_modal_g_codes_response(pk.read_response(pk.encode_modal_g_codes(codes))) == codes
+
+
+@given(st.binary(max_size=300))
+def test_property_modal_decoder_raises_only_typed_errors(payload: bytes) -> None:
+    with contextlib.suppress(ProtocolError, CncError):
+        assert all(isinstance(c, ModalGCode) for c in pk.decode_modal_g_codes_response(payload))
+
+
+@pytest.mark.parametrize("item", [it.ReadModalGCodes(), it.ReadToolNumber()])
+def test_native_transport_has_no_wire_form_for_modal_or_tool(item: it.ReadItem) -> None:
+    result = native.item_result(native.plan_item(item, CTX), [], CTX)
+    assert isinstance(result, NotSupported) and "no public" in str(result)
+
+
+def test_simulator_answers_modal_codes_and_tool_number() -> None:
+    state = MachineState()
+    modal = pk.decode_modal_g_codes_response(packed_server.answer(state, pk.Command.RDGCODE, b""))
+    assert modal == state.modal_g_codes() and modal[0].code in ("G00", "G01")
+    tool = pk.decode_tool_number_response(packed_server.answer(state, pk.Command.RDTOOLNUM, b""))
+    assert tool == state.tool_number() and 1 <= tool <= 4
