@@ -527,6 +527,8 @@ class PollPlan(_Model):
     # G54..G59 work-coordinate offsets to publish as WorkOffset/G5x/<axis> (cnc_rdzofs: FOCAS library
     # host only, no public wire form), counters period
     work_offsets: list[int] = Field(default_factory=list)
+    modal: bool = False  # Modal/G: the active block's modal G codes (cnc_rdgcode, library host only), counters
+    tool_number: bool = False  # Tool/Number: the T code in use (cnc_modal, library host only), counters
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)

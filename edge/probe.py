@@ -121,7 +121,7 @@ def probe_items() -> list[it.ReadItem]:
     ]
     items += [it.ReadTimer(kind) for kind in range(5)]
     items += [it.ReadToolOffsets(kind, 1, 1) for kind in range(len(it.TOOL_OFFSET_KINDS))]
-    items.append(it.ReadWorkOffsets(1))
+    items += [it.ReadWorkOffsets(1), it.ReadModalGCodes(), it.ReadToolNumber()]
     items.append(it.ReadOperatorMessages())
     items.append(it.ReadPathStatus(2))
     items.append(it.ReadAlarmHistory(PROBE_ALARM_HISTORY_DEPTH))

@@ -115,5 +115,7 @@ NAMED_READS: dict[str, NamedRead] = {
                               _tool_offsets, _named_parts(it.TOOL_OFFSET_KINDS)),
     "work_offsets": NamedRead((it.ReadAxisNames(), *(it.ReadWorkOffsets(n) for n in range(1, 7))),
                               _work_offsets, _named_parts(WORK_OFFSET_CODES, first=1)),
+    "modal": NamedRead((it.ReadModalGCodes(),), lambda r: {str(m.group): m.code for m in r[0]}),
+    "tool_number": NamedRead((it.ReadToolNumber(),), lambda r: r[0]),
     "clock": NamedRead((it.ReadClock(),), lambda r: r[0]),
 }

@@ -157,7 +157,7 @@ class MachinePlan:
         poll = machine.poll
         reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
         reads += (_program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
-                  + _work_offset_reads(machine, static))
+                  + _work_offset_reads(machine, static) + _library_reads(machine))
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
         reads += _macro_reads(machine)
         reads += _pmc_reads(machine)
@@ -276,6 +276,21 @@ def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
     if poll.part_count:
         reads += [PlannedRead(Group.COUNTERS, it.ReadParams(number, number), (spec,))
                   for number, spec in ((PART_TOTAL_PARAM, PART_TOTAL), (PART_REQUIRED_PARAM, PART_REQUIRED))]
+    return reads
+
+
+MODAL_G = MetricSpec("Modal/G", MetricType.STRING,
+                     description='modal G codes of the active block, JSON {"<group>": "<code>"} (FOCAS library)')
+TOOL_NUMBER = MetricSpec("Tool/Number", MetricType.INT32, description="T code in use (FOCAS library)")
+
+
+def _library_reads(machine: MachineConfig) -> list[PlannedRead]:
+    """Opt-in reads only the FOCAS library host serves (no public native wire form), at the counters period."""
+    reads = []
+    if machine.poll.modal:
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadModalGCodes(), (MODAL_G,)))
+    if machine.poll.tool_number:
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadToolNumber(), (TOOL_NUMBER,)))
     return reads
 
 
@@ -408,6 +423,8 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return _as_list
         case it.ReadAlarmHistory():
             return lambda result: []  # published per entry as events, see edge.collect.alarms
+        case it.ReadModalGCodes():
+            return lambda result: [json.dumps({str(m.group): m.code for m in result}, separators=(",", ":"))]
         case _:
             return lambda result: [result]
 

@@ -98,7 +98,8 @@ def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[st
     assert rows["clock"]["value"][:4].isdigit()
 
 
-LIBRARY_ONLY_READS = {"work_offsets"}  # no public native wire form: the library host (packed surface) serves it
+# No public native wire form: only the library host (packed surface) serves these.
+LIBRARY_ONLY_READS = {"work_offsets", "modal", "tool_number"}
 
 
 def test_every_named_read_offers_what_the_client_reads(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
@@ -129,6 +130,15 @@ def test_work_offsets_are_named_per_g_code_and_axis_through_the_packed_surface(
     value = json_lines(out)["work_offsets"]["value"]
     assert list(value) == ["G54", "G55", "G56", "G57", "G58", "G59"]
     assert value["G55"] == dict(zip(sim.state.axis_names(), sim.state.work_offsets(2), strict=True))
+
+
+def test_modal_and_tool_number_are_named_reads_through_the_packed_surface(
+        sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", "--transport", "packed", sim.packed.address, "modal",
+                             "tool_number")
+    assert code == 0, err
+    rows = json_lines(out)
+    assert rows["modal"]["value"]["13"] == "G54" and rows["tool_number"]["value"] in range(1, 5)
 
 
 def test_work_offsets_on_the_native_transport_fail_saying_there_is_no_wire_code(

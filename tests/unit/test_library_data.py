@@ -165,3 +165,20 @@ def test_simulator_answers_modal_codes_and_tool_number() -> None:
     assert modal == state.modal_g_codes() and modal[0].code in ("G00", "G01")
     tool = pk.decode_tool_number_response(packed_server.answer(state, pk.Command.RDTOOLNUM, b""))
     assert tool == state.tool_number() and 1 <= tool <= 4
+
+
+def test_modal_and_tool_number_are_opt_in_counters_reads_with_one_metric_each() -> None:
+    config = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "modal: true, tool_number: true"),
+                          "t", {})
+    plan = MachinePlan.build(config.machines[0], config.alarms, StaticInfo(axis_names=("X",)))
+    by_item = {type(r.item).__name__: r for r in plan.reads}
+    modal, tool = by_item["ReadModalGCodes"], by_item["ReadToolNumber"]
+    assert modal.group is Group.COUNTERS and tool.group is Group.COUNTERS
+    assert [(s.name, s.type) for s in (*modal.metrics, *tool.metrics)] == [
+        ("Modal/G", MetricType.STRING), ("Tool/Number", MetricType.INT32)]
+    assert [v for _, v in metric_values(modal, [ModalGCode(0, "G01"), ModalGCode(13, "G54")])] == [
+        '{"0":"G01","13":"G54"}']
+    assert [v for _, v in metric_values(tool, 12)] == [12]
+    default = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "timers: true"), "t", {})
+    names = {s.name for s in MachinePlan.build(default.machines[0], default.alarms).metrics()}
+    assert not {"Modal/G", "Tool/Number"} & names
