@@ -133,13 +133,13 @@ async def test_library_only_data_comes_from_the_library_host_while_fast_polls_st
             assert json.loads(json.loads(modal.payload)["value"])["13"] == "G54"
             [tool, *_] = await observer.wait_topic("focas/m1/state/Tool/Number", timeout=15)
             assert json.loads(tool.payload)["value"] in range(1, 5)
-            status = len(observer.on("focas/m1/state/Axis/X/Absolute"))
-            await async_wait_for(lambda: len(observer.on("focas/m1/state/Axis/X/Absolute")) > status + 2,
-                                 timeout=15, message="native status polls going on")
+            data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+            await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                                 timeout=15, message="native polls going on")
         finally:
             daemon.request_stop()
             assert await asyncio.wait_for(task, 15) == 0
-        # The library host saw its identity read and the work offsets only: every fast poll stayed native.
+        # The library host saw its identity read and the library-only reads: every fast poll stayed native.
         assert {r.command for r in sim.packed.requests} == {pk.Command.SYSINFO, pk.Command.RDZOFS,
                                                             pk.Command.RDGCODE, pk.Command.RDTOOLNUM}
         assert {pk.decode_i16_request(r.payload, "rdzofs") for r in sim.packed.requests_for(pk.Command.RDZOFS)} \
