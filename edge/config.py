@@ -873,6 +873,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
     config._warnings.extend(_history_route_warnings(config))
+    config._warnings.extend(_library_only_warnings(config))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
@@ -1002,6 +1003,21 @@ def _history_route_warnings(config: Config) -> list[str]:
                 f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
                 f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
                 f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
+    return warnings
+
+
+def _library_only_warnings(config: Config) -> list[str]:
+    """Poll flags only a FOCAS library host serves, on a native-only machine: they would be dropped at once."""
+    warnings = []
+    for index, machine in enumerate(config.machines):
+        poll = machine.poll
+        flags = [name for name, on in (("work_offsets", bool(poll.work_offsets)), ("modal", poll.modal),
+                                       ("tool_number", poll.tool_number)) if on]
+        if flags and machine.transport == "focas" and machine.fwlib_host is None:
+            warnings.append(
+                f"machines[{index}] ({machine.id}): poll {', '.join(flags)} on the native transport alone: "
+                f"no public wire code exists for them, so they will NOT be published (Plan/DroppedFunctions "
+                f"lists them). Add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
     return warnings
 
 

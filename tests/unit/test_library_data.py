@@ -182,3 +182,13 @@ def test_modal_and_tool_number_are_opt_in_counters_reads_with_one_metric_each() 
     default = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "timers: true"), "t", {})
     names = {s.name for s in MachinePlan.build(default.machines[0], default.alarms).metrics()}
     assert not {"Modal/G", "Tool/Number"} & names
+
+
+def test_library_only_flags_on_a_native_only_machine_warn_naming_them() -> None:
+    flags = "work_offsets: [54], modal: true, tool_number: true"
+    native_only = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", flags), "t", {})
+    [warning] = [w for w in native_only.warnings if "native transport alone" in w]
+    assert "work_offsets, modal, tool_number" in warning and "fwlib_host" in warning
+    routed = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", flags).replace(
+        "host: h\n", "host: h\n    fwlib_host: 'tcp:127.0.0.1:18193'\n"), "t", {})
+    assert not [w for w in routed.warnings if "native transport alone" in w]
