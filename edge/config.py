@@ -524,6 +524,11 @@ class PollPlan(_Model):
     timers: bool = True  # Times/PowerOn, Operating, Cutting, Cycle (0x120), counters period
     operator_messages: bool = True  # Message/Operator (0x34), status group
     tool_offsets: int = Field(default=0, ge=0, le=MAX_TOOL_OFFSETS)  # offsets 1..n of each kind (0x08), counters
+    # G54..G59 work-coordinate offsets to publish as WorkOffset/G5x/<axis> (cnc_rdzofs: FOCAS library
+    # host only, no public wire form), counters period
+    work_offsets: list[int] = Field(default_factory=list)
+    modal: bool = False  # Modal/G: the active block's modal G codes (cnc_rdgcode, library host only), counters
+    tool_number: bool = False  # Tool/Number: the T code in use (cnc_modal, library host only), counters
     macros: list[MacroRange] = Field(default_factory=list)
     pmc: list[PmcRange] = Field(default_factory=list)
     params: list[NumberedItem] = Field(default_factory=list)
@@ -537,6 +542,16 @@ class PollPlan(_Model):
         assert set(value) <= set(POSITION_KINDS)
         if len(set(value)) != len(value):
             raise ValueError(f"{value}: a position kind is listed twice")
+        return value
+
+    @field_validator("work_offsets")
+    @classmethod
+    def _work_offset_codes(cls, value: list[int]) -> list[int]:
+        bad = [g for g in value if not 54 <= g <= 59]
+        if bad:
+            raise ValueError(f"work offset G{bad[0]}: expected G codes 54..59, e.g. [54, 55]")
+        if len(set(value)) != len(value):
+            raise ValueError(f"{value}: a work offset is listed twice")
         return value
 
     @model_validator(mode="after")
@@ -858,6 +873,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
     config._warnings.extend(_history_route_warnings(config))
+    config._warnings.extend(_library_only_warnings(config))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
@@ -987,6 +1003,21 @@ def _history_route_warnings(config: Config) -> list[str]:
                 f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
                 f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
                 f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
+    return warnings
+
+
+def _library_only_warnings(config: Config) -> list[str]:
+    """Poll flags only a FOCAS library host serves, on a native-only machine: they would be dropped at once."""
+    warnings = []
+    for index, machine in enumerate(config.machines):
+        poll = machine.poll
+        flags = [name for name, on in (("work_offsets", bool(poll.work_offsets)), ("modal", poll.modal),
+                                       ("tool_number", poll.tool_number)) if on]
+        if flags and machine.transport == "focas" and machine.fwlib_host is None:
+            warnings.append(
+                f"machines[{index}] ({machine.id}): poll {', '.join(flags)} on the native transport alone: "
+                f"no public wire code exists for them, so they will NOT be published (Plan/DroppedFunctions "
+                f"lists them). Add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
     return warnings
 
 

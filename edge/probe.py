@@ -121,6 +121,7 @@ def probe_items() -> list[it.ReadItem]:
     ]
     items += [it.ReadTimer(kind) for kind in range(5)]
     items += [it.ReadToolOffsets(kind, 1, 1) for kind in range(len(it.TOOL_OFFSET_KINDS))]
+    items += [it.ReadWorkOffsets(1), it.ReadModalGCodes(), it.ReadToolNumber()]
     items.append(it.ReadOperatorMessages())
     items.append(it.ReadPathStatus(2))
     items.append(it.ReadAlarmHistory(PROBE_ALARM_HISTORY_DEPTH))
@@ -142,6 +143,8 @@ def describe_arguments(item: it.ReadItem) -> str:
             return f"{it.TOOL_OFFSET_KINDS[kind]} {first}..{first + count - 1}"
         case it.ReadPathStatus(path=path):
             return f"path {path}"
+        case it.ReadWorkOffsets(number=number):
+            return f"G{it.WORK_OFFSET_FIRST_G + number - 1}" if number else "external"
         case it.ReadTimer(kind=kind):
             return f"kind {kind}"
         case it.ReadControlledAxes(what=what):

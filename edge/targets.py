@@ -7,7 +7,8 @@ in the config, so the three can never disagree about what `pmc:R100.3` means:
     pmc:R100             pmc:R100-R103          pmc:R100.3 (bit 3)       pmc:D2204.word   pmc:D2204-D2207.word
     param:6711           param:1815/1 (axis 1)  param:1815/0.3 (axis 0, bit 3)          param:6711.2
     param:1850/all (every axis, read-only)      diag:980             diag:980-981/1        diag:308-309/all
-    sysinfo status alarms program programs positions axes spindles speeds loads timers messages tool_offsets clock
+    sysinfo status alarms program programs positions axes spindles speeds loads timers messages tool_offsets
+    work_offsets modal tool_number clock
                                                             (read-only names, whole-CNC reads)
 
 PMC addresses are byte addresses and ranges are inclusive, as pmc_rdpmcrng counts them: a typed range
@@ -40,7 +41,8 @@ MAX_AXIS = 32
 MAX_PATH = MAX_PATHS  # `@N` names a path 1..MAX_PATH
 # The named reads of `focas-edge read` (edge/cli/named_reads.py says what each reads).
 READ_NAMES = ("sysinfo", "status", "alarms", "program", "programs", "positions", "axes", "spindles", "speeds",
-              "loads", "timers", "messages", "tool_offsets", "clock")
+              "loads", "timers", "messages", "tool_offsets", "work_offsets", "modal",
+              "tool_number", "clock")
 PMC_TYPE_NAMES: dict[str, PmcType] = {
     "byte": PmcType.BYTE,
     "word": PmcType.WORD,

@@ -72,6 +72,16 @@ def _tool_offsets(results: list[Any]) -> object:
     return table
 
 
+WORK_OFFSET_CODES = tuple(f"G{it.WORK_OFFSET_FIRST_G + n}" for n in range(6))  # cnc_rdzofs 1..6
+
+
+def _work_offsets(results: list[Any]) -> object:
+    """{G54: {axis name: value}, ...} for the offsets the control (its library host) answered."""
+    names, *offsets = results
+    return {code: _by_name(names, values) for code, values in zip(WORK_OFFSET_CODES, offsets, strict=True)
+            if values is not None}
+
+
 def _named_parts(names: Sequence[str], first: int = 0) -> dict[int, str]:
     return {first + index: name for index, name in enumerate(names)}
 
@@ -103,5 +113,9 @@ NAMED_READS: dict[str, NamedRead] = {
     "tool_offsets": NamedRead(tuple(it.ReadToolOffsets(kind, 1, TOOL_OFFSETS_SHOWN)
                                     for kind in range(len(it.TOOL_OFFSET_KINDS))),
                               _tool_offsets, _named_parts(it.TOOL_OFFSET_KINDS)),
+    "work_offsets": NamedRead((it.ReadAxisNames(), *(it.ReadWorkOffsets(n) for n in range(1, 7))),
+                              _work_offsets, _named_parts(WORK_OFFSET_CODES, first=1)),
+    "modal": NamedRead((it.ReadModalGCodes(),), lambda r: {str(m.group): m.code for m in r[0]}),
+    "tool_number": NamedRead((it.ReadToolNumber(),), lambda r: r[0]),
     "clock": NamedRead((it.ReadClock(),), lambda r: r[0]),
 }

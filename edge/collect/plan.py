@@ -156,7 +156,8 @@ class MachinePlan:
         static = static or StaticInfo()
         poll = machine.poll
         reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
-        reads += _program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
+        reads += (_program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
+                  + _work_offset_reads(machine, static) + _library_reads(machine))
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
         reads += _macro_reads(machine)
         reads += _pmc_reads(machine)
@@ -207,6 +208,8 @@ def drop_key(item: it.ReadItem) -> str:
             return f"{item.operation}:{kind}"
         case it.ReadTimer(kind=kind) | it.ReadToolOffsets(kind=kind):
             return f"{item.operation}:{kind}"
+        case it.ReadWorkOffsets(number=number):
+            return f"{item.operation}:{number}"
     return item.operation
 
 
@@ -273,6 +276,32 @@ def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
     if poll.part_count:
         reads += [PlannedRead(Group.COUNTERS, it.ReadParams(number, number), (spec,))
                   for number, spec in ((PART_TOTAL_PARAM, PART_TOTAL), (PART_REQUIRED_PARAM, PART_REQUIRED))]
+    return reads
+
+
+MODAL_G = MetricSpec("Modal/G", MetricType.STRING,
+                     description='modal G codes of the active block, JSON {"<group>": "<code>"} (FOCAS library)')
+TOOL_NUMBER = MetricSpec("Tool/Number", MetricType.INT32, description="T code in use (FOCAS library)")
+
+
+def _library_reads(machine: MachineConfig) -> list[PlannedRead]:
+    """Opt-in reads only the FOCAS library host serves (no public native wire form), at the counters period."""
+    reads = []
+    if machine.poll.modal:
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadModalGCodes(), (MODAL_G,)))
+    if machine.poll.tool_number:
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadToolNumber(), (TOOL_NUMBER,)))
+    return reads
+
+
+def _work_offset_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+    """WorkOffset/G5x/<axis> per configured G code, one value per axis, at the counters period."""
+    reads: list[PlannedRead] = []
+    for g_code in machine.poll.work_offsets if static.axis_names else ():
+        specs = tuple(MetricSpec(f"WorkOffset/G{g_code}/{axis}", MetricType.DOUBLE, axis_unit(axis),
+                                 description="work-coordinate offset (FOCAS library)")
+                      for axis in static.axis_names)
+        reads.append(PlannedRead(Group.COUNTERS, it.ReadWorkOffsets(it.work_offset_number(g_code)), specs))
     return reads
 
 
@@ -390,10 +419,12 @@ def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
             return lambda result: [json.dumps([{"number": m.number, "type": m.type, "text": m.text} for m in result],
                                               separators=(",", ":"))]
         case (it.ReadMacros() | it.ReadPmc() | it.ReadSpindleLoad() | it.ReadPositions() | it.ReadServoMeter()
-              | it.ReadToolOffsets()):
+              | it.ReadToolOffsets() | it.ReadWorkOffsets()):
             return _as_list
         case it.ReadAlarmHistory():
             return lambda result: []  # published per entry as events, see edge.collect.alarms
+        case it.ReadModalGCodes():
+            return lambda result: [json.dumps({str(m.group): m.code for m in result}, separators=(",", ":"))]
         case _:
             return lambda result: [result]
 

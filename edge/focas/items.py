@@ -179,6 +179,35 @@ class ReadToolOffsets(ReadItem):
 
 
 @dataclass(frozen=True, slots=True)
+class ReadWorkOffsets(ReadItem):
+    """-> list[float | None] per controlled axis of one work offset (cnc_rdzofs number: 0 external,
+    1..6 G54..G59). Vendor library only: the native protocol has no public wire form for it."""
+
+    number: int = 1
+
+
+@dataclass(frozen=True, slots=True)
+class ReadModalGCodes(ReadItem):
+    """-> list[ModalGCode] of the active block, every modal group (cnc_rdgcode type -1, block 1).
+    Vendor library only: no public wire form."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReadToolNumber(ReadItem):
+    """-> int, the T code in use (cnc_modal type 108, active block). Vendor library only: no public wire form."""
+
+
+WORK_OFFSET_FIRST_G = 54  # cnc_rdzofs offset number 1 is G54
+
+
+def work_offset_number(g_code: int) -> int:
+    """cnc_rdzofs's offset number for G54..G59; ValueError for any other G code."""
+    if not WORK_OFFSET_FIRST_G <= g_code <= WORK_OFFSET_FIRST_G + 5:
+        raise ValueError(f"work offset G{g_code}: expected 54..59")
+    return g_code - WORK_OFFSET_FIRST_G + 1
+
+
+@dataclass(frozen=True, slots=True)
 class ReadOperatorMessages(ReadItem):
     """-> list[OperatorMessage] (the first message only on the native transport)"""
 

@@ -154,6 +154,14 @@ class TimerValue:
 
 
 @dataclass(frozen=True, slots=True)
+class ModalGCode:
+    """cnc_rdgcode (ODBGCD): the G code active in one modal group of the active block, e.g. (0, "G01")."""
+
+    group: int  # the group index the library answers
+    code: str
+
+
+@dataclass(frozen=True, slots=True)
 class Capabilities:
     """Which operations a transport/control pair can do; the daemon asks instead of branching on transport."""
 

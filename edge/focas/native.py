@@ -140,7 +140,7 @@ def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
             if count < 1 or not 0 <= kind < len(it.TOOL_OFFSET_KINDS):
                 raise ValueError(f"tool offsets: kind {kind} (0..3) and count {count} (>= 1)")
             return _one(item, fn.TOOL_OFFSETS, first, first + count - 1, kind, path=path)
-        case it.ReadAlarmHistory():
+        case it.ReadAlarmHistory() | it.ReadWorkOffsets() | it.ReadModalGCodes() | it.ReadToolNumber():
             return ItemPlan(item, error=NotSupported(item.operation, NO_WIRE_CODE))
     return ItemPlan(item, error=NotSupported(item.operation, "the native transport does not know this item"))
 

@@ -38,6 +38,7 @@ from edge.focas.errors import (
 from edge.focas.model import (
     ActiveAlarm,
     AlarmHistoryEntry,
+    ModalGCode,
     ParamRecord,
     ParamType,
     PmcType,
@@ -73,6 +74,9 @@ class Command(enum.IntEnum):
     ACTS = 0x400A  # cnc_acts: actual spindle speed
     RDAXISNAME = 0x400B  # cnc_rdaxisname: axis names
     RDTIMER = 0x400C  # cnc_rdtimer: minutes + milliseconds
+    RDZOFS = 0x400D  # cnc_rdzofs: one work-coordinate offset, every axis (IODBZOFS)
+    RDGCODE = 0x400E  # cnc_rdgcode: modal G codes of the active block (ODBGCD)
+    RDTOOLNUM = 0x400F  # cnc_modal type 108: the T code in use (ODBMDL aux)
 
 
 # Ids another implementation of the surface uses with a layout we do not know; never assign them.
@@ -99,6 +103,9 @@ FOCAS_NAMES: dict[Command, str] = {
     Command.ACTS: "cnc_acts",
     Command.RDAXISNAME: "cnc_rdaxisname",
     Command.RDTIMER: "cnc_rdtimer",
+    Command.RDZOFS: "cnc_rdzofs",
+    Command.RDGCODE: "cnc_rdgcode",
+    Command.RDTOOLNUM: "cnc_modal",
 }
 
 
@@ -765,3 +772,44 @@ def decode_axis_names_response(payload: bytes) -> list[str]:
         raw[i : i + AXIS_NAME_WIDTH].rstrip(b"\x00").decode("ascii", errors="replace")
         for i in range(0, len(raw), AXIS_NAME_WIDTH)
     ]
+
+
+# ---- work-coordinate offsets (0x400D) ------------------------------------------------------------------
+# The request is one i16 offset number (cnc_rdzofs: 0 external, 1..6 G54..G59); the answer is encode_floats'
+# i16 count + one f64 per controlled axis (the library host reads IODBZOFS with type -1, every axis).
+
+
+def decode_work_offsets_response(payload: bytes) -> list[float | None]:
+    return decode_floats_response(payload, Command.RDZOFS)
+
+
+# ---- modal G codes (0x400E) ------------------------------------------------------------------------------
+# Empty request. Answer: i16 count, then count x (i16 group, 8-byte ASCII code NUL-padded): ODBGCD minus flag.
+G_CODE_WIDTH = 8
+_GCODE_HEAD = struct.Struct("<h")
+
+
+def encode_modal_g_codes(codes: Sequence[ModalGCode]) -> bytes:
+    return _I16.pack(len(codes)) + b"".join(
+        _GCODE_HEAD.pack(c.group) + c.code.encode("ascii", errors="replace")[:G_CODE_WIDTH].ljust(G_CODE_WIDTH, b"\x00")
+        for c in codes)
+
+
+def decode_modal_g_codes_response(payload: bytes) -> list[ModalGCode]:
+    body = _body_after_status(payload, Command.RDGCODE)
+    if len(body) < 2:
+        raise ProtocolError(f"cnc_rdgcode: expected an i16 count, got {len(body)} bytes")
+    (count,) = _I16.unpack_from(body)
+    entry = _GCODE_HEAD.size + G_CODE_WIDTH
+    _expect_length(body, 2 + entry * max(count, 0), f"cnc_rdgcode with {count} codes")
+    codes = []
+    for at in range(2, len(body), entry):
+        (group,) = _GCODE_HEAD.unpack_from(body, at)
+        raw = body[at + _GCODE_HEAD.size : at + entry]
+        codes.append(ModalGCode(group, raw.rstrip(b"\x00").decode("ascii", errors="replace")))
+    return codes
+
+
+# ---- T code in use (0x400F): empty request, answer i32 (encode_int32) ------------------------------------
+def decode_tool_number_response(payload: bytes) -> int:
+    return decode_int32_response(payload, Command.RDTOOLNUM)

@@ -179,6 +179,12 @@ def plan_item(item: it.ReadItem) -> ItemPlan:
             return _single(C.GETTIME, b"", pk.decode_clock_response)
         case it.ReadTimer(kind=kind):
             return _single(C.RDTIMER, pk.encode_i16(kind), pk.decode_timer_response)
+        case it.ReadModalGCodes():
+            return _single(C.RDGCODE, b"", pk.decode_modal_g_codes_response)
+        case it.ReadToolNumber():
+            return _single(C.RDTOOLNUM, b"", pk.decode_tool_number_response)
+        case it.ReadWorkOffsets(number=number):
+            return _single(C.RDZOFS, pk.encode_i16(number), pk.decode_work_offsets_response)
         case it.ReadAlarmHistory(depth=depth):
             return _single(C.RDALMHISTRY, pk.encode_alarm_history_request(depth), pk.decode_alarm_history)
     raise NotSupported(item.operation, "the packed surface has no command id for it")
@@ -187,7 +193,8 @@ def plan_item(item: it.ReadItem) -> ItemPlan:
 SUPPORTED_READS: frozenset[str] = frozenset({
     "ReadSysInfo", "ReadStatus", "ReadAlarmStatus", "ReadActiveAlarms", "ReadProgramNumber",
     "ReadSequenceNumber", "ReadFeed", "ReadSpindleSpeed", "ReadPositions", "ReadAxisNames", "ReadParams",
-    "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer", "ReadAlarmHistory",
+    "ReadDiag", "ReadMacros", "ReadPmc", "ReadClock", "ReadTimer", "ReadAlarmHistory", "ReadWorkOffsets",
+    "ReadModalGCodes", "ReadToolNumber",
 })
 SUPPORTED_WRITES: frozenset[str] = frozenset({"write_macro", "write_pmc", "write_param"})
 

@@ -36,7 +36,7 @@ from edge.focas.errors import (
     ProtocolError,
 )
 from edge.focas.functions import PMC_ADR_TYPES
-from edge.focas.model import ActiveAlarm, ParamRecord, ParamType, PmcType, SysInfo
+from edge.focas.model import ActiveAlarm, ModalGCode, ParamRecord, ParamType, PmcType, SysInfo
 from edge.fwlib import structs as st
 from edge.fwlib.library import FocasLibrary
 
@@ -65,6 +65,8 @@ class LibraryCnc:
     handle: int
     param_types: dict[int, ParamType] = field(default_factory=dict)
     diag_types: dict[int, ParamType] = field(default_factory=dict)
+    input_decimals: int = 3  # cnc_rdzofs answers integers in the least input increment (configured)
+    axis_count: int | None = None  # controlled axes, from cnc_sysinfo's `axes`; None until read
     history_version: int | None = None  # the cnc_rdalmhistryN this control answered; None until tried
     lost_code: int = 0  # the negative EW_* code that said the handle is gone (the worker reconnects)
 
@@ -340,6 +342,49 @@ def _gettime(cnc: LibraryCnc, payload: bytes) -> bytes:
     return pk.read_response(struct.pack("<6h", *fields))
 
 
+def _axis_count(cnc: LibraryCnc) -> int:
+    """Controlled axes (ODBSYS.axes, two ASCII digits), read once per handle; at most MAX_AXIS."""
+    if cnc.axis_count is None:
+        info = st.ODBSYS()
+        cnc.call("cnc_sysinfo", ctypes.byref(info))
+        digits = _text(info.axes).strip()
+        cnc.axis_count = max(0, min(int(digits), st.MAX_AXIS)) if digits.isdigit() else st.MAX_AXIS
+    return cnc.axis_count
+
+
+def _rdzofs(cnc: LibraryCnc, payload: bytes) -> bytes:
+    """One work offset for every axis (type -1); integers in the least input increment become mm/inch."""
+    number = pk.decode_i16_request(payload, "cnc_rdzofs request")
+    axes = _axis_count(cnc)
+    zofs = st.IODBZOFS()
+    length = st.IODBZOFS.data.offset + axes * (st.IODBZOFS.data.size // st.MAX_AXIS)
+    cnc.call("cnc_rdzofs", number, -1, length, ctypes.byref(zofs))
+    return pk.read_response(pk.encode_floats([pk.from_scaled(v, cnc.input_decimals) for v in zofs.data[:axes]]))
+
+
+MAX_G_GROUPS = 64  # room for every modal group cnc_rdgcode answers (the header's raux1 holds 27)
+GCODE_ALL_GROUPS, ACTIVE_BLOCK = -1, 1  # cnc_rdgcode type and block as FOCAS users pass them
+
+
+def _rdgcode(cnc: LibraryCnc, payload: bytes) -> bytes:
+    """Every modal group's G code of the active block; an empty code (group not in use) is left out."""
+    count = ctypes.c_short(MAX_G_GROUPS)
+    codes = (st.ODBGCD * MAX_G_GROUPS)()
+    cnc.call("cnc_rdgcode", GCODE_ALL_GROUPS, ACTIVE_BLOCK, ctypes.byref(count), codes)
+    answered = [codes[i] for i in range(max(0, min(count.value, MAX_G_GROUPS)))]
+    modal = [ModalGCode(c.group, _text(bytes(c.code).split(b"\x00", 1)[0]).strip()) for c in answered]
+    return pk.read_response(pk.encode_modal_g_codes([m for m in modal if m.code]))
+
+
+MODAL_T_CODE, MODAL_ACTIVE_BLOCK = 108, 0  # cnc_modal type of address T; block 0 = the active block
+
+
+def _tool_number(cnc: LibraryCnc, payload: bytes) -> bytes:
+    modal = st.ODBMDL()
+    cnc.call("cnc_modal", MODAL_T_CODE, MODAL_ACTIVE_BLOCK, ctypes.byref(modal))
+    return pk.read_response(pk.encode_int32(int(modal.modal.aux.aux_data)))
+
+
 TRANSLATIONS: dict[int, Translation] = {
     pk.Command.SYSINFO: _sysinfo,
     pk.Command.RDCNCSTAT: _statinfo,
@@ -356,6 +401,9 @@ TRANSLATIONS: dict[int, Translation] = {
     pk.Command.ACTF: _act("cnc_actf"),
     pk.Command.ACTS: _act("cnc_acts"),
     pk.Command.GETTIME: _gettime,
+    pk.Command.RDZOFS: _rdzofs,
+    pk.Command.RDGCODE: _rdgcode,
+    pk.Command.RDTOOLNUM: _tool_number,
 }
 
 

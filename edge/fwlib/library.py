@@ -45,6 +45,9 @@ SIGNATURES: dict[str, list[Any]] = {
     "cnc_actf": [_ushort, _P(st.ODBACT)],
     "cnc_acts": [_ushort, _P(st.ODBACT)],
     "cnc_gettimer": [_ushort, _P(st.IODBTIMER)],
+    "cnc_rdzofs": [_ushort, _short, _short, _short, _P(st.IODBZOFS)],
+    "cnc_rdgcode": [_ushort, _short, _short, _P(_short), _P(st.ODBGCD)],
+    "cnc_modal": [_ushort, _short, _short, _P(st.ODBMDL)],
 }
 REQUIRED = ("cnc_allclibhndl3", "cnc_freelibhndl", "cnc_sysinfo")
 # Linux only: the library's process-wide set-up and tear-down (fwlib32.h declares them outside _WIN32).

@@ -8,6 +8,7 @@
         listen: unix:/run/focas-edge-fwlib/mill-1.sock
         params: {6711: two_word, 1815: bit}  # data type per parameter number the daemon reads or writes
         diag: {300: two_word}
+        input_decimals: 3                    # decimals of the least input increment (IS-B mm: 3)
 
 `listen` is a Unix socket (mode `socket_mode`, default 0660) or loopback TCP. A non-loopback TCP address
 (the host on a Windows or x86 PC next to the gateway) needs `allow_remote: true`: the surface has no
@@ -44,6 +45,9 @@ class HostMachine(BaseModel):
     listen: str
     params: dict[int, ParamTypeName] = Field(default_factory=dict)
     diag: dict[int, ParamTypeName] = Field(default_factory=dict)
+    input_decimals: int = Field(default=3, ge=0, le=9, description=(
+        "decimal places of the control's least input increment: cnc_rdzofs answers integers in it "
+        "(IS-B metric 0.001 mm: 3; IS-C or inch: 4)"))
 
     @field_validator("cnc")
     @classmethod
@@ -54,7 +58,7 @@ class HostMachine(BaseModel):
     def target(self) -> CncTarget:
         host, port = _split_host_port(self.cnc)
         return CncTarget(self.name, host, port, {n: PARAM_TYPES[t] for n, t in self.params.items()},
-                         {n: PARAM_TYPES[t] for n, t in self.diag.items()})
+                         {n: PARAM_TYPES[t] for n, t in self.diag.items()}, self.input_decimals)
 
     def address(self) -> PackedAddress:
         return parse_packed_address(self.listen)

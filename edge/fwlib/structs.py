@@ -84,6 +84,15 @@ def build(long_type: Any = ctypes.c_long, pack: int | None = None) -> dict[str, 
     clock = struct("TIMER_TIME", [("hour", short), ("minute", short), ("second", short)])
     t["IODBTIMER"] = struct("IODBTIMER", [("type", short), ("dummy", short),
                                           ("data", union("TIMER_DATA", [("date", date), ("time", clock)]))])
+    # cnc_rdzofs: one work-coordinate offset; type is the axis (-1 all), data in the least input increment
+    t["IODBZOFS"] = struct("IODBZOFS", [("datano", short), ("type", short), ("data", long * MAX_AXIS)])
+    # cnc_rdgcode: one modal G code (an array of them for type -1)
+    t["ODBGCD"] = struct("ODBGCD", [("group", short), ("flag", short), ("code", char * 8)])
+    # cnc_modal (default branch, not HSSB FS16WD): other-data types (100..) answer in modal.aux
+    aux = struct("MODAL_AUX", [("aux_data", long), ("flag1", char), ("flag2", char)])
+    t["ODBMDL"] = struct("ODBMDL", [("datano", short), ("type", short), ("modal", union("MODAL_U", [
+        ("g_data", char), ("g_rdata", char * 35), ("g_1shot", char * 4), ("aux", aux), ("raux1", aux * 27),
+        ("raux2", aux * MAX_AXIS)]))])
     # Alarm history: cnc_rdalmhistry2 (ODBAHIS2), 3 (ODBAHIS3, adds pth_no) and 4 (ODBAHIS4, 64-byte message);
     # all dates are shorts. Each ODBAHISn is {u16 s_no, u16 e_no, entry alm_his[10]}.
     head = [
@@ -114,13 +123,16 @@ ODBALM: Any = _PLATFORM["ODBALM"]
 ODBALMMSG: Any = _PLATFORM["ODBALMMSG"]
 ODBACT: Any = _PLATFORM["ODBACT"]
 IODBTIMER: Any = _PLATFORM["IODBTIMER"]
+IODBZOFS: Any = _PLATFORM["IODBZOFS"]
+ODBGCD: Any = _PLATFORM["ODBGCD"]
+ODBMDL: Any = _PLATFORM["ODBMDL"]
 ODBAHIS2: Any = _PLATFORM["ODBAHIS2"]
 ODBAHIS3: Any = _PLATFORM["ODBAHIS3"]
 ODBAHIS4: Any = _PLATFORM["ODBAHIS4"]
 
 # The structs the library calls take, by their fwlib32.h name: the layout test walks this table.
 TOP_LEVEL = ("ODBSYS", "ODBST", "REALPRM", "IODBPSD", "ODBM", "IODBPMC", "ODBALM", "ODBALMMSG", "ODBACT",
-             "IODBTIMER", "ODBAHIS2", "ODBAHIS3", "ODBAHIS4")
+             "IODBTIMER", "IODBZOFS", "ODBGCD", "ODBMDL", "ODBAHIS2", "ODBAHIS3", "ODBAHIS4")
 STRUCTS: dict[str, StructType] = {name: _PLATFORM[name] for name in TOP_LEVEL}
 
 

@@ -46,6 +46,7 @@ class CncTarget:
     port: int = 8193
     param_types: dict[int, ParamType] = field(default_factory=dict)
     diag_types: dict[int, ParamType] = field(default_factory=dict)
+    input_decimals: int = 3  # the least input increment's decimals: cnc_rdzofs answers integers in it
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,8 @@ class HandleWorker:
             thread.retire()
             raise
         self._thread = thread
-        self._cnc = LibraryCnc(library, handle, dict(target.param_types), dict(target.diag_types))
+        self._cnc = LibraryCnc(library, handle, dict(target.param_types), dict(target.diag_types),
+                               input_decimals=target.input_decimals)
         self.connects += 1
         log.info("CNC handle open machine=%s address=%s:%d handle=%d", target.name, target.host, target.port,
                  handle)

@@ -129,6 +129,11 @@ def _timer(state: MachineState, payload: bytes) -> bytes:
     return pk.read_response(pk.encode_timer(state.timer(kind)))
 
 
+def _work_offsets(state: MachineState, payload: bytes) -> bytes:
+    number = pk.decode_i16_request(payload, "cnc_rdzofs request")
+    return pk.read_response(pk.encode_floats(state.work_offsets(number)))
+
+
 HANDLERS: dict[int, Handler] = {
     pk.Command.RDCNCSTAT: _status_of,
     pk.Command.RDPARAM: _param,
@@ -150,6 +155,9 @@ HANDLERS: dict[int, Handler] = {
     pk.Command.ACTS: lambda s, _: pk.read_response(pk.encode_float(s.spindle_speed())),
     pk.Command.RDAXISNAME: lambda s, _: pk.read_response(pk.encode_axis_names(s.axis_names())),
     pk.Command.RDTIMER: _timer,
+    pk.Command.RDZOFS: _work_offsets,
+    pk.Command.RDGCODE: lambda s, _: pk.read_response(pk.encode_modal_g_codes(s.modal_g_codes())),
+    pk.Command.RDTOOLNUM: lambda s, _: pk.read_response(pk.encode_int32(s.tool_number())),
 }
 
 

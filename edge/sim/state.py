@@ -43,6 +43,7 @@ from edge.focas.model import (
     ActiveAlarm,
     AlarmHistoryEntry,
     ExecProgram,
+    ModalGCode,
     OperatorMessage,
     ParamRecord,
     ParamType,
@@ -56,6 +57,7 @@ from edge.focas.model import (
 from edge.sim.profiles import Profile, get_profile
 
 TOOL_OFFSET_COUNT = 64  # offsets the simulated control keeps per kind
+WORK_OFFSET_COUNT = 6  # G54..G59 (number 0, the external offset, exists too)
 LOAD_BLANK_MESSAGE = 2001  # the operator message shown between parts
 
 MACRO_RANGES = ((100, 199), (500, 999))  # common (volatile) and common (kept) variables
@@ -454,6 +456,20 @@ class MachineState:
             cutting, into = self._phase_at(self._cycle_time())
             return 10 + 10 * int(40 * into / self.cycle.cut_seconds) if cutting else 0
 
+    def modal_g_codes(self) -> list[ModalGCode]:
+        """The active block's modal G codes (cnc_rdgcode groups as the library indexes them, 0 = motion):
+        G01 while cutting, G00 between parts; the rest fixed (plane, absolute, mm/min, metric, G54)."""
+        with self._lock:
+            cutting, _ = self._phase_at(self._cycle_time())
+        fixed = ((1, "G17"), (2, "G90"), (4, "G94"), (5, "G21"), (6, "G40"), (7, "G49"), (8, "G80"), (13, "G54"))
+        return [ModalGCode(0, "G01" if cutting else "G00"), *(ModalGCode(g, code) for g, code in fixed)]
+
+    def tool_number(self) -> int:
+        """The T code in use: one tool per quarter of the cut (T1..T4), the first tool between parts."""
+        with self._lock:
+            cutting, into = self._phase_at(self._cycle_time())
+            return 1 + min(3, int(4 * into / self.cycle.cut_seconds)) if cutting else 1
+
     def exec_program(self) -> ExecProgram:
         number = self.cycle.program_number
         return ExecProgram(number, f"O{number:04d}")
@@ -478,6 +494,15 @@ class MachineState:
         bases = ((100.0, 2.5), (0.0, -0.002), (5.0, 0.5), (0.0, 0.001))
         base, step = bases[kind]
         return [round(base + step * n, 4) for n in range(first, last + 1)]
+
+    def work_offsets(self, number: int) -> list[float]:
+        """Work-coordinate offset `number` (0 external, 1..6 G54..G59) for every controlled axis."""
+        if not 0 <= number <= WORK_OFFSET_COUNT:
+            raise cnc_error(EW_NUMBER, "cnc_rdzofs",
+                            message=f"work offset {number} is outside 0..{WORK_OFFSET_COUNT}")
+        if number == 0:
+            return [0.0] * self.profile.axis_count
+        return [round(-100.0 * (index + 1) - 10.0 * number - 0.125, 3) for index in range(self.profile.axis_count)]
 
     def program_directory(self, start: int = 1, count: int = 19) -> list[ProgramDirEntry]:
         """Programs numbered >= start, at most count of them (an empty list past the last)."""

@@ -42,6 +42,17 @@ typedef struct iodbtimer {
         struct { short hour; short minute; short second; } time;
     } data;
 } IODBTIMER;
+typedef struct iodbzofs { short datano; short type; long data[MAX_AXIS]; } IODBZOFS;
+typedef struct odbgcd { short group; short flag; char code[8]; } ODBGCD;
+typedef struct odbmdl {
+    short datano; short type;
+    union {
+        char g_data; char g_rdata[35]; char g_1shot[4];
+        struct { long aux_data; char flag1; char flag2; } aux;
+        struct { long aux_data; char flag1; char flag2; } raux1[27];
+        struct { long aux_data; char flag1; char flag2; } raux2[MAX_AXIS];
+    } modal;
+} ODBMDL;
 typedef struct odbahis2 {
     unsigned short s_no; unsigned short e_no;
     struct {
@@ -140,6 +151,30 @@ typedef struct odbahis4 {
     X(IODBTIMER, "data.time.hour", data.time.hour) \
     X(IODBTIMER, "data.time.minute", data.time.minute) \
     X(IODBTIMER, "data.time.second", data.time.second) \
+    X(IODBZOFS, "datano", datano) \
+    X(IODBZOFS, "type", type) \
+    X(IODBZOFS, "data", data) \
+    X(ODBGCD, "group", group) \
+    X(ODBGCD, "flag", flag) \
+    X(ODBGCD, "code", code) \
+    X(ODBMDL, "datano", datano) \
+    X(ODBMDL, "type", type) \
+    X(ODBMDL, "modal", modal) \
+    X(ODBMDL, "modal.g_data", modal.g_data) \
+    X(ODBMDL, "modal.g_rdata", modal.g_rdata) \
+    X(ODBMDL, "modal.g_1shot", modal.g_1shot) \
+    X(ODBMDL, "modal.aux", modal.aux) \
+    X(ODBMDL, "modal.aux.aux_data", modal.aux.aux_data) \
+    X(ODBMDL, "modal.aux.flag1", modal.aux.flag1) \
+    X(ODBMDL, "modal.aux.flag2", modal.aux.flag2) \
+    X(ODBMDL, "modal.raux1", modal.raux1) \
+    X(ODBMDL, "modal.raux1.aux_data", modal.raux1[0].aux_data) \
+    X(ODBMDL, "modal.raux1.flag1", modal.raux1[0].flag1) \
+    X(ODBMDL, "modal.raux1.flag2", modal.raux1[0].flag2) \
+    X(ODBMDL, "modal.raux2", modal.raux2) \
+    X(ODBMDL, "modal.raux2.aux_data", modal.raux2[0].aux_data) \
+    X(ODBMDL, "modal.raux2.flag1", modal.raux2[0].flag1) \
+    X(ODBMDL, "modal.raux2.flag2", modal.raux2[0].flag2) \
     X(ODBAHIS2, "s_no", s_no) \
     X(ODBAHIS2, "e_no", e_no) \
     X(ODBAHIS2, "alm_his", alm_his) \
@@ -161,6 +196,6 @@ typedef struct odbahis4 {
     X(ODBAHIS4, "alm_his.alm_msg", alm_his[0].alm_msg)
 
 /* S(type) for every struct the library calls take */
-#define FWLIB_STRUCTS(S) S(ODBSYS) S(ODBST) S(REALPRM) S(IODBPSD) S(ODBM) S(IODBPMC) S(ODBALM) S(ODBALMMSG) S(ODBACT) S(IODBTIMER) S(ODBAHIS2) S(ODBAHIS3) S(ODBAHIS4)
+#define FWLIB_STRUCTS(S) S(ODBSYS) S(ODBST) S(REALPRM) S(IODBPSD) S(ODBM) S(IODBPMC) S(ODBALM) S(ODBALMMSG) S(ODBACT) S(IODBTIMER) S(IODBZOFS) S(ODBGCD) S(ODBMDL) S(ODBAHIS2) S(ODBAHIS3) S(ODBAHIS4)
 
 #endif

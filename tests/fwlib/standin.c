@@ -52,6 +52,8 @@ const char *standin_layouts(void) {
 #define PMC_BYTES 10000
 #define MAX_HISTORY 250
 #define MAX_HANDLES 16
+#define WORK_OFFSETS 7  /* 0 external, 1..6 G54..G59 */
+#define STANDIN_AXES 3  /* cnc_sysinfo says "03" */
 
 struct param { short number; short type; long value; long dec; };  /* type 0 bit .. 4 real */
 struct macro { short number; long mcr_val; short dec_val; };
@@ -76,13 +78,21 @@ static int hang_macro = -1;
 static volatile int released;
 static int calls_rdpmcrng, calls_wrpmcrng, calls_allclibhndl3;
 static short last_wrpmc_start, last_wrpmc_end;
+static long work_offsets[WORK_OFFSETS][STANDIN_AXES]; /* in the least input increment */
+static int calls_rdzofs;
+static long tool_in_use;
+#define GCODE_GROUPS 4
+static const char *const gcodes[GCODE_GROUPS] = {"G01", "G17", "G90", "G54"};
+static const short gcode_groups[GCODE_GROUPS] = {0, 1, 2, 13};
+static short last_rdzofs_length;
 
 void standin_reset(void) {
     pthread_mutex_lock(&lock);
     n_params = n_macros = n_history = 0;
     memset(pmc, 0, sizeof(pmc));
     pwe = 1; history_version = 4; refuse_connects = 0; hang_macro = -1; released = 0;
-    calls_rdpmcrng = calls_wrpmcrng = calls_allclibhndl3 = 0;
+    calls_rdpmcrng = calls_wrpmcrng = calls_allclibhndl3 = calls_rdzofs = 0;
+    memset(work_offsets, 0, sizeof(work_offsets)); last_rdzofs_length = 0; tool_in_use = 0;
     pthread_mutex_unlock(&lock);
 }
 void standin_set_param(short number, short type, long value, long dec) {
@@ -106,8 +116,14 @@ int standin_calls(const char *name) {
     if (!strcmp(name, "pmc_rdpmcrng")) return calls_rdpmcrng;
     if (!strcmp(name, "pmc_wrpmcrng")) return calls_wrpmcrng;
     if (!strcmp(name, "cnc_allclibhndl3")) return calls_allclibhndl3;
+    if (!strcmp(name, "cnc_rdzofs")) return calls_rdzofs;
     return -1;
 }
+void standin_set_work_offset(short number, short axis, long value) {
+    if (number >= 0 && number < WORK_OFFSETS && axis >= 1 && axis <= STANDIN_AXES) work_offsets[number][axis - 1] = value;
+}
+short standin_last_rdzofs_length(void) { return last_rdzofs_length; }
+void standin_set_tool(long t) { tool_in_use = t; }
 int standin_started_up(void) { return started_up; }
 /* Every handle handed out so far now answers EW_HANDLE, as after the CNC dropped the connection. */
 void standin_drop_handles(void) {
@@ -332,6 +348,41 @@ short cnc_rdalmmsg(unsigned short h, short type, short *num, ODBALMMSG *out) {
 }
 short cnc_actf(unsigned short h, ODBACT *out) { CHECK_HANDLE(h); memset(out, 0, sizeof(*out)); out->data = 1200; return EW_OK; }
 short cnc_acts(unsigned short h, ODBACT *out) { CHECK_HANDLE(h); memset(out, 0, sizeof(*out)); out->data = 8000; return EW_OK; }
+/* type -1: every axis, which needs length >= 4 + axes * sizeof(long); type n: axis n alone */
+short cnc_rdzofs(unsigned short h, short number, short axis, short length, IODBZOFS *out) {
+    CHECK_HANDLE(h);
+    calls_rdzofs++;
+    last_rdzofs_length = length;
+    if (number < 0 || number >= WORK_OFFSETS) return EW_NUMBER;
+    if (axis != -1 && (axis < 1 || axis > STANDIN_AXES)) return EW_ATTRIB;
+    int count = axis == -1 ? STANDIN_AXES : 1;
+    if (length < (short)(offsetof(IODBZOFS, data) + count * sizeof(long))) return EW_LENGTH;
+    out->datano = number; out->type = axis;
+    for (int i = 0; i < count; i++) out->data[i] = work_offsets[number][axis == -1 ? i : axis - 1];
+    return EW_OK;
+}
+/* type -1 (every group), block 1 (active): *num in = room in out[], out = codes written */
+short cnc_rdgcode(unsigned short h, short type, short block, short *num, ODBGCD *out) {
+    CHECK_HANDLE(h);
+    if (type != -1 || block != 1) return EW_ATTRIB;
+    if (*num < GCODE_GROUPS) return EW_LENGTH;
+    for (int i = 0; i < GCODE_GROUPS; i++) {
+        memset(&out[i], 0, sizeof(out[i]));
+        out[i].group = gcode_groups[i];
+        strncpy(out[i].code, gcodes[i], sizeof(out[i].code));
+    }
+    *num = GCODE_GROUPS;
+    return EW_OK;
+}
+/* type 108 (T code), block 0 (active) only */
+short cnc_modal(unsigned short h, short type, short block, ODBMDL *out) {
+    CHECK_HANDLE(h);
+    if (type != 108 || block != 0) return EW_ATTRIB;
+    memset(out, 0, sizeof(*out));
+    out->datano = type; out->type = block;
+    out->modal.aux.aux_data = tool_in_use; out->modal.aux.flag1 = 1;
+    return EW_OK;
+}
 short cnc_gettimer(unsigned short h, IODBTIMER *io) {
     CHECK_HANDLE(h);
     time_t now = time(NULL);

@@ -83,6 +83,9 @@ class Standin:
         self.lib.standin_set_pmc.argtypes = [ctypes.c_short, ctypes.c_ushort, ctypes.c_ubyte]
         self.lib.standin_pmc.argtypes = [ctypes.c_short, ctypes.c_ushort]
         self.lib.standin_calls.argtypes = [ctypes.c_char_p]
+        self.lib.standin_set_work_offset.argtypes = [ctypes.c_short, ctypes.c_short, ctypes.c_long]
+        self.lib.standin_last_rdzofs_length.restype = ctypes.c_short
+        self.lib.standin_set_tool.argtypes = [ctypes.c_long]
         self.lib.standin_reset()
 
     def layout_rows(self) -> list[tuple[str, str, int, int]]:

@@ -98,12 +98,17 @@ def test_read_every_item_kind_as_json(sim: Sim, capsys: pytest.CaptureFixture[st
     assert rows["clock"]["value"][:4].isdigit()
 
 
+# No public native wire form: only the library host (packed surface) serves these.
+LIBRARY_ONLY_READS = {"work_offsets", "modal", "tool_number"}
+
+
 def test_every_named_read_offers_what_the_client_reads(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
     """Loads, names, timers, program name/path/directory: every client function, one JSON shape."""
-    code, out, err = run_cli(capsys, "read", "--json", sim.address, *NAMED_READS)
+    native_reads = [name for name in NAMED_READS if name not in LIBRARY_ONLY_READS]
+    code, out, err = run_cli(capsys, "read", "--json", sim.address, *native_reads)
     assert code == 0, err
     rows = json_lines(out)
-    assert set(rows) == set(NAMED_READS) and all(row["error"] is None for row in rows.values())
+    assert set(rows) == set(native_reads) and all(row["error"] is None for row in rows.values())
     state = sim.state
     axes, spindles = state.axis_names(), state.spindle_names()
     loads = rows["loads"]["value"]
@@ -116,6 +121,32 @@ def test_every_named_read_offers_what_the_client_reads(sim: Sim, capsys: pytest.
     assert program["name"] == state.exec_program().name and program["path"] == state.main_program_path()
     assert [p["number"] for p in rows["programs"]["value"]] == [p.number for p in state.program_directory(1, 19)]
     assert set(rows["speeds"]["value"]) == {"feed", "spindle"}
+
+
+def test_work_offsets_are_named_per_g_code_and_axis_through_the_packed_surface(
+        sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", "--transport", "packed", sim.packed.address, "work_offsets")
+    assert code == 0, err
+    value = json_lines(out)["work_offsets"]["value"]
+    assert list(value) == ["G54", "G55", "G56", "G57", "G58", "G59"]
+    assert value["G55"] == dict(zip(sim.state.axis_names(), sim.state.work_offsets(2), strict=True))
+
+
+def test_modal_and_tool_number_are_named_reads_through_the_packed_surface(
+        sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "read", "--json", "--transport", "packed", sim.packed.address, "modal",
+                             "tool_number")
+    assert code == 0, err
+    rows = json_lines(out)
+    assert rows["modal"]["value"]["13"] == "G54" and rows["tool_number"]["value"] in range(1, 5)
+
+
+def test_work_offsets_on_the_native_transport_fail_saying_there_is_no_wire_code(
+        sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run_cli(capsys, "read", "--json", sim.address, "work_offsets")
+    assert code != 0
+    error = json_lines(out)["work_offsets"]["error"]
+    assert error["type"] == "NotSupported" and "no public" in error["message"]
 
 
 def test_named_reads_match_the_target_grammar() -> None:

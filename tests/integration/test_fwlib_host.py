@@ -6,6 +6,7 @@ PackedClient -> packed endpoint -> worker thread -> ctypes -> the stand-in's C s
 from __future__ import annotations
 
 import asyncio
+import ctypes
 import os
 import stat
 import struct
@@ -18,10 +19,13 @@ from pathlib import Path
 
 import pytest
 
+from edge.focas import items as it
 from edge.focas import packed as pk
 from edge.focas.errors import AccessDenied, CncError, OutOfRange
+from edge.focas.model import ModalGCode
 from edge.focas.packed_client import PackedClient
 from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.fwlib import structs as st
 from edge.fwlib.host import FwlibHost, start_host
 from edge.fwlib.library import load_library
 from edge.fwlib.settings import HostSettings
@@ -364,3 +368,33 @@ def test_the_command_serves_until_sigterm_and_exits_0(standin: Standin, tmp_path
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+# ---- work-coordinate offsets (cnc_rdzofs, packed ext 0x400D) ----------------------------------------------
+async def test_work_offset_travels_as_least_increments_and_arrives_in_mm(standin: Standin,
+                                                                           cnc: PackedClient) -> None:
+    standin.set_work_offset(1, 1, -123456)
+    standin.set_work_offset(1, 2, 1)
+    standin.set_work_offset(2, 1, 5000)
+    assert await cnc.read(it.ReadWorkOffsets(1)) == [-123.456, 0.001, 0.0]
+    assert await cnc.read(it.ReadWorkOffsets(2)) == [5.0, 0.0, 0.0]
+    # every axis (type -1): the length covers the header and the stand-in's three controlled axes
+    assert standin.last_rdzofs_length() == st.IODBZOFS.data.offset + 3 * ctypes.sizeof(ctypes.c_long)
+
+
+async def test_a_work_offset_the_control_lacks_is_its_error_not_a_value(cnc: PackedClient) -> None:
+    with pytest.raises(OutOfRange, match="cnc_rdzofs"):
+        await cnc.read(it.ReadWorkOffsets(42))
+
+
+# ---- modal G codes (cnc_rdgcode, ext 0x400E) and the T code in use (cnc_modal, ext 0x400F) ---------------
+async def test_modal_g_codes_of_the_active_block_come_through_the_library(cnc: PackedClient) -> None:
+    assert await cnc.read(it.ReadModalGCodes()) == [
+        ModalGCode(0, "G01"), ModalGCode(1, "G17"), ModalGCode(2, "G90"), ModalGCode(13, "G54")]
+
+
+async def test_tool_number_in_use_is_cnc_modals_t_code(standin: Standin, cnc: PackedClient) -> None:
+    standin.set_tool(12)
+    assert await cnc.read(it.ReadToolNumber()) == 12
+    standin.set_tool(7)
+    assert await cnc.read(it.ReadToolNumber()) == 7

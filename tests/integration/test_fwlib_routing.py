@@ -110,6 +110,45 @@ def test_probe_shows_which_transport_answers_each_function(capsys: pytest.Captur
     assert writes["write_macro"]["via"] == "native"
     history = [line for line in table.splitlines() if line.strip().startswith("ReadAlarmHistory")]
     assert history and "[fwlib-host]" in history[0]
+    for library_only in ("ReadWorkOffsets", "ReadModalGCodes", "ReadToolNumber"):
+        assert functions[library_only]["via"] == "fwlib-host" and functions[library_only]["outcome"] == "ok"
+
+
+async def test_library_only_data_comes_from_the_library_host_while_fast_polls_stay_native(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    async with Fleet([MachineSpec(profile="30i")], base_port=0, packed_base_port=0) as fleet:
+        sim = fleet[0]
+        axes = sim.state.axis_names()
+        machine = (f"  - {{id: m1, host: 127.0.0.1, port: {sim.port}, "
+                   f"fwlib_host: 'tcp:127.0.0.1:{sim.packed_port}', {TIMEOUTS}, "
+                   "poll: {periods: {status: 0.25}, work_offsets: [54, 55], modal: true, tool_number: true}}\n")
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machine)))
+        task = asyncio.create_task(daemon.run())
+        try:
+            for g_code, number in ((54, 1), (55, 2)):
+                for axis, value in zip(axes, sim.state.work_offsets(number), strict=True):
+                    [doc, *_] = await observer.wait_topic(f"focas/m1/state/WorkOffset/G{g_code}/{axis}", timeout=15)
+                    assert json.loads(doc.payload)["value"] == value
+            [modal, *_] = await observer.wait_topic("focas/m1/state/Modal/G", timeout=15)
+            assert json.loads(json.loads(modal.payload)["value"])["13"] == "G54"
+            [tool, *_] = await observer.wait_topic("focas/m1/state/Tool/Number", timeout=15)
+            assert json.loads(tool.payload)["value"] in range(1, 5)
+            data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+            await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                                 timeout=15, message="native polls going on")
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 15) == 0
+        # The library host saw its identity read and the library-only reads: every fast poll stayed native.
+        assert {r.command for r in sim.packed.requests} == {pk.Command.SYSINFO, pk.Command.RDZOFS,
+                                                            pk.Command.RDGCODE, pk.Command.RDTOOLNUM}
+        assert {pk.decode_i16_request(r.payload, "rdzofs") for r in sim.packed.requests_for(pk.Command.RDZOFS)} \
+            == {1, 2}
+    birth = metrics_by_name(observer.on("spBv1.0/plant/DBIRTH/gw/m1")[0].spb())
+    assert {f"WorkOffset/G54/{axis}" for axis in axes} <= set(birth)
+    dropped = birth["Plan/DroppedFunctions"].string_value
+    assert not {"ReadWorkOffsets", "ReadModalGCodes", "ReadToolNumber"} & set(dropped.split(","))
+    assert {"Modal/G", "Tool/Number"} <= set(birth)
 
 
 async def native_polls_go_on(mosquitto: Mosquitto, observer: Observer, tmp_path: Path, fwlib_host: str,

@@ -83,8 +83,9 @@ async def test_catalogue_matches_the_births_of_every_profile(
     async with Fleet([MachineSpec(profile=p) for p in profiles], base_port=0, packed_base_port=0) as fleet:
         machines = "".join(f"  - {{id: m{i}, host: 127.0.0.1, port: {m.port}, poll: {RICH_POLL}}}\n"
                            for i, m in enumerate(fleet))
-        # The packed transport publishes what the native one cannot (alarm history).
-        machines += f"  - {{id: mp, transport: packed, address: 'tcp:127.0.0.1:{fleet[0].packed_port}'}}\n"
+        # The packed transport publishes what the native one cannot (alarm history, work offsets, modal, tool).
+        machines += (f"  - {{id: mp, transport: packed, address: 'tcp:127.0.0.1:{fleet[0].packed_port}', "
+                     "poll: {work_offsets: [54], modal: true, tool_number: true}}\n")
         daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines,
                                                    "alarms: {mode: ActivePlusHistory}\n")))
         task = asyncio.create_task(daemon.run())

@@ -416,3 +416,20 @@ def test_cli_read_and_write_over_packed_tcp_and_unix(tmp_path: Path,
             assert "EW_PASSWD" in capsys.readouterr().err
         finally:
             thread.call(handle.close)
+
+
+async def test_work_offsets_come_from_the_simulators_packed_server(state: MachineState,
+                                                                    client: PackedClient) -> None:
+    [g54, g55] = await client.batch([it.ReadWorkOffsets(1), it.ReadWorkOffsets(2)])
+    assert g54 == state.work_offsets(1) and g55 == state.work_offsets(2)
+    assert len(g54) == state.profile.axis_count and g54 != g55
+    with pytest.raises(OutOfRange, match="cnc_rdzofs"):
+        await client.read(it.ReadWorkOffsets(7))
+
+
+async def test_modal_g_codes_and_tool_number_come_from_the_simulators_packed_server(
+        state: MachineState, client: PackedClient) -> None:
+    modal, tool = await client.batch([it.ReadModalGCodes(), it.ReadToolNumber()])
+    assert {m.group: m.code for m in modal}[13] == "G54" and {m.group for m in modal} == {
+        m.group for m in state.modal_g_codes()}
+    assert 1 <= tool <= 4
