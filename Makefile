@@ -5,7 +5,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 RUN_STAMP := $(VENV)/.run-stamp
 
-.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check browser-check venv
+.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check browser-check venv \
+        deb systemd-check arm64-check
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -64,7 +65,6 @@ clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
 
 ## make deb: dist/focas-edge_<version>_<arch>.deb for this machine's architecture (dpkg-deb; docs/install.md)
-.PHONY: deb systemd-check arm64-check
 deb:
 	bash scripts/build-deb.sh
 
