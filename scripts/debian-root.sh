@@ -14,9 +14,8 @@ if [[ -f $dir/.complete ]]; then
     echo "debian-root: cached $arch root at $dir"
     exit 0
 fi
-for tool in debootstrap; do
-    command -v $tool >/dev/null || apt-get -o DPkg::Lock::Timeout=900 install -y debootstrap systemd-container qemu-user-static
-done
+command -v debootstrap >/dev/null \
+    || apt-get -o DPkg::Lock::Timeout=900 install -y debootstrap systemd-container qemu-user-static
 if [[ $arch != "$(dpkg --print-architecture)" ]]; then
     bash "$(dirname "$0")/binfmt-enable.sh" "$arch"
 fi
