@@ -41,6 +41,7 @@ from edge.config_lines import with_lines
 from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
+from edge.focas.paths import MAX_PATHS
 from edge.targets import (
     ALL_AXES,
     MAX_AXIS,
@@ -670,9 +671,6 @@ class Timeouts(_Model):
 
 
 _PACKED_ADDRESS_RE = re.compile(r"tcp:[^:\s]+:\d{1,5}|unix:/\S+", re.ASCII)
-
-
-MAX_PATHS = 10  # the most paths a 30i-B series control offers
 
 
 class MachineConfig(_Model):
