@@ -41,6 +41,7 @@ from edge.config_lines import with_lines
 from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
+from edge.focas.paths import MAX_PATHS
 from edge.targets import (
     ALL_AXES,
     MAX_AXIS,
@@ -672,9 +673,6 @@ class Timeouts(_Model):
 _PACKED_ADDRESS_RE = re.compile(r"tcp:[^:\s]+:\d{1,5}|unix:/\S+", re.ASCII)
 
 
-MAX_PATHS = 10  # the most paths a 30i-B series control offers
-
-
 class MachineConfig(_Model):
     id: SparkplugId
     host: str | None = None
@@ -872,8 +870,7 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     if problems:
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
-    config._warnings.extend(_history_route_warnings(config))
-    config._warnings.extend(_library_only_warnings(config))
+    config._warnings.extend(_native_only_warnings(config))
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
@@ -990,35 +987,29 @@ def _clamp_warnings(data: dict[str, Any]) -> list[str]:
     return warnings
 
 
-def _history_route_warnings(config: Config) -> list[str]:
-    """ActivePlusHistory on a native-only machine: the wire has no public alarm-history code (docs/protocol.md)."""
-    warnings = []
-    for index, machine in enumerate(config.machines):
-        if config.alarms_for(machine).mode != "ActivePlusHistory":
-            continue
-        if machine.transport == "focas" and machine.fwlib_host is None:
-            warnings.append(
-                f"machines[{index}] ({machine.id}): alarms mode ActivePlusHistory on the native transport alone: "
-                f"the CNC's alarm history will NOT be published (no public wire code for cnc_rdalmhistry; "
-                f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
-                f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
-                f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
-    return warnings
-
-
-def _library_only_warnings(config: Config) -> list[str]:
-    """Poll flags only a FOCAS library host serves, on a native-only machine: they would be dropped at once."""
-    warnings = []
-    for index, machine in enumerate(config.machines):
+def _native_only_warnings(config: Config) -> list[str]:
+    """What a native-only machine (no fwlib_host) is set to publish but cannot: the wire has no public code for
+    alarm history nor for the library-only poll flags (docs/protocol.md), so they would be dropped at once."""
+    native_only = [(index, machine) for index, machine in enumerate(config.machines)
+                   if machine.transport == "focas" and machine.fwlib_host is None]
+    history = [
+        f"machines[{index}] ({machine.id}): alarms mode ActivePlusHistory on the native transport alone: "
+        f"the CNC's alarm history will NOT be published (no public wire code for cnc_rdalmhistry; "
+        f"Plan/DroppedFunctions lists ReadAlarmHistory). Active alarms and the raise/clear events the "
+        f"gateway derives from them at its poll rate (stamped with CNC time) WILL be published. "
+        f"For the history, add fwlib_host: (a focas-edge fwlib-host, docs/install.md)"
+        for index, machine in native_only if config.alarms_for(machine).mode == "ActivePlusHistory"]
+    library = []
+    for index, machine in native_only:
         poll = machine.poll
         flags = [name for name, on in (("work_offsets", bool(poll.work_offsets)), ("modal", poll.modal),
                                        ("tool_number", poll.tool_number)) if on]
-        if flags and machine.transport == "focas" and machine.fwlib_host is None:
-            warnings.append(
+        if flags:
+            library.append(
                 f"machines[{index}] ({machine.id}): poll {', '.join(flags)} on the native transport alone: "
                 f"no public wire code exists for them, so they will NOT be published (Plan/DroppedFunctions "
                 f"lists them). Add fwlib_host: (a focas-edge fwlib-host, docs/install.md)")
-    return warnings
+    return history + library
 
 
 def _duplicate_ids(data: dict[str, Any]) -> Iterator[str]:

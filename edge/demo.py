@@ -22,6 +22,7 @@ from typing import Any
 from edge.config import Config, MachineConfig, load_config
 from edge.daemon import Daemon
 from edge.live_view import LiveView
+from edge.logformat import configure_logging
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.state import CycleSpec
 from edge.watch import Watcher
@@ -146,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--raw", action="store_true",
                         help="print every message decoded (the firehose) instead of the compact live view")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure_logging(args.log_level)
     for noisy in ("amqtt", "transitions"):
         logging.getLogger(noisy).setLevel(logging.ERROR)
     return asyncio.run(run_demo(args.config, args.duration, args.raw))

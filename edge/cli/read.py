@@ -204,11 +204,11 @@ async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]
     """Connect, read every plan's items in ONE batch, shape the results per CLI item."""
     try:
         async with session as cnc:
-            outcomes = await _read_batch(cnc, plans)
+            outcomes = await read_batch(cnc, plans)
             retry = [(i, plan.per_axis) for i, (plan, outcome) in enumerate(zip(plans, outcomes, strict=True))
                      if plan.per_axis is not None and refused_as_axis_type(outcome.error)]
             if retry:  # axis-type numbers asked with axis 0: read them for every axis
-                again = await _read_batch(cnc, [p for _, p in retry if p is not None])
+                again = await read_batch(cnc, [p for _, p in retry if p is not None])
                 for (index, _), outcome in zip(retry, again, strict=True):
                     outcomes[index] = outcome
     except FocasError as exc:
@@ -216,7 +216,8 @@ async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]
     return outcomes
 
 
-async def _read_batch(cnc: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
+async def read_batch(cnc: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
+    """Every plan's items in ONE batch on a connected session, shaped per CLI item."""
     results = await cnc.batch([item for plan in plans for item in plan.items])
     outcomes = []
     position = 0

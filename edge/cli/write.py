@@ -17,7 +17,6 @@ import argparse
 import asyncio
 import json
 import math
-import struct
 import sys
 from dataclasses import dataclass
 from functools import partial
@@ -32,6 +31,7 @@ from edge.cli.read import (
     json_value,
     parse_and_open,
     plan_read,
+    read_batch,
 )
 from edge.command.errors import CommandRefused
 from edge.command.requests import WriteOp, pmc_bytes
@@ -39,11 +39,6 @@ from edge.command.target_io import check_param, expected_macro, param_record, re
 from edge.focas.errors import FocasError
 from edge.focas.model import PmcType
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
-
-_PMC_FORMATS = {PmcType.BYTE: "B", PmcType.WORD: "H", PmcType.LONG: "I", PmcType.FLOAT: "f",
-                PmcType.DOUBLE: "d"}
-_SIGNED_FORMATS = {PmcType.BYTE: "b", PmcType.WORD: "h", PmcType.LONG: "i"}
-
 
 # PMC areas whose signals another party owns: a write there changes what the ladder believes.
 GUARDED_AREAS = {
@@ -128,16 +123,15 @@ def _pmc_bytes(text: str, target: PmcTarget, raw: str) -> bytes:
         raise TargetError(f"{text!r}: {target} holds {target.count} value(s), got {len(parts)}")
     kind = target.data_type
     if kind in (PmcType.FLOAT, PmcType.DOUBLE):
-        return struct.pack(f">{len(parts)}{_PMC_FORMATS[kind]}", *(_finite(text, p) for p in parts))
-    packed = b""
+        return pmc_bytes(target, tuple(_finite(text, p) for p in parts))
     bits = kind.width * 8
+    values = []
     for part in parts:
         value = _integer(text, part)
         if not -(1 << (bits - 1)) <= value < (1 << bits):
             raise TargetError(f"{text!r}: {part} does not fit a {kind.name.lower()} ({bits} bits)")
-        fmt = _SIGNED_FORMATS[kind] if value < 0 else _PMC_FORMATS[kind]
-        packed += struct.pack(f">{fmt}", value)
-    return packed
+        values.append(value)
+    return pmc_bytes(target, tuple(values))
 
 
 async def apply(session: Any, write: Write) -> None:
@@ -157,7 +151,7 @@ async def write_all(session: Any, writes: list[Write]) -> list[ItemOutcome]:
                 except (FocasError, CommandRefused) as exc:
                     outcomes.append(ItemOutcome(write.text, error=exc))
                     break
-                (read_back,) = await read_all_connected(cnc, str(write.target))
+                (read_back,) = await read_batch(cnc, [plan_read(str(write.target))])
                 error = read_back.error
                 if error is None and not holds(write, read_back.value):
                     error = ReadBackDiffers(f"written, but reads back {json.dumps(json_value(read_back.value))}, "
@@ -195,15 +189,6 @@ def holds(write: Write, shown: object) -> bool:
         return False
     expected = expected_macro(float(wanted)) if isinstance(target, MacroTarget) else float(wanted)
     return math.isclose(float(shown), expected, rel_tol=1e-9, abs_tol=1e-9)
-
-
-async def read_all_connected(cnc: Any, text: str) -> list[ItemOutcome]:
-    plan = plan_read(text)
-    results = await cnc.batch(list(plan.items))
-    failed = next((r for r in results if isinstance(r, BaseException)), None)
-    if failed is not None:
-        return [ItemOutcome(text, error=failed)]
-    return [ItemOutcome(text, plan.shape(results))]
 
 
 def register(subparsers: Any) -> None:

@@ -28,13 +28,12 @@ def authorise(op: WriteOp, policy: WritePolicy) -> bool:
     covering = [rule for rule in policy.allow if rule.pattern.covers(op.target)]
     if not covering:
         raise CommandRefused(ErrorCode.NOT_ALLOWED, f"{op.target} is not covered by any writes.allow pattern")
+    if any(rule.min is None and rule.max is None for rule in covering):
+        return False
     values = numeric_values(op)
     reading = _pmc_reading(op)
     other = reading is not None and any(reading.is_other(int(v)) for v in values)
     held = tuple(float(reading.held(int(v))) for v in values) if reading is not None else values
-    unbounded = [rule for rule in covering if rule.min is None and rule.max is None]
-    if unbounded:
-        return False
     if not other and any(all(_within(rule, v) for v in held) for rule in covering):
         return True
     bounds = ", ".join(_describe(rule) for rule in covering)
