@@ -26,7 +26,8 @@ from typing import Any
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
 from edge.focas.model import ParamType
-from edge.fwlib.calls import LibraryCnc, answer, error_answer
+from edge.focas.packed_endpoint import error_answer
+from edge.fwlib.calls import LibraryCnc, answer
 from edge.fwlib.library import FocasLibrary
 
 log = logging.getLogger(__name__)
