@@ -17,6 +17,7 @@ import contextlib
 import logging
 import os
 import stat
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
@@ -29,6 +30,9 @@ log = logging.getLogger(__name__)
 # (command id, request payload) -> response payload; never raises for a CNC-side failure (answers a status).
 Responder = Callable[[int, bytes], Awaitable[bytes]]
 _READ_CHUNK = 65536
+# Requests an endpoint remembers (newest last) for tests and probes to observe. Bounded: the library host
+# serves for months, and an unbounded log grows with every request.
+REQUEST_LOG = 4096
 
 
 def error_status(error: CncError | ProtocolError) -> int:
@@ -65,7 +69,7 @@ class PackedEndpoint:
     host: str = ""
     port: int = 0
     unix_path: str = ""
-    requests: list[PackedRequest] = field(default_factory=list)
+    requests: deque[PackedRequest] = field(default_factory=lambda: deque(maxlen=REQUEST_LOG))
     _sessions: dict[asyncio.Task[None], asyncio.StreamWriter] = field(default_factory=dict)
 
     @property

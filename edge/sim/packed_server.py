@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import struct
+from collections import deque
 from collections.abc import Callable
 
 from edge.focas import packed as pk
@@ -198,8 +199,8 @@ class PackedServer:
         return self.endpoint.unix_path
 
     @property
-    def requests(self) -> list[PackedRequest]:
-        """Every request in arrival order (tests observe chunking and counts here)."""
+    def requests(self) -> deque[PackedRequest]:
+        """The latest requests (REQUEST_LOG) in arrival order (tests observe chunking and counts here)."""
         return self.endpoint.requests
 
     @property
