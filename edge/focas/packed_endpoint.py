@@ -4,6 +4,10 @@ Both servers of the surface sit on this: the simulator (edge.sim.packed_server, 
 and the FOCAS library host (edge.fwlib, FANUC's library behind it). The endpoint reads frames, awaits the
 responder for each in arrival order (the surface answers in order, so a client may pipeline) and writes
 the answer with the request's command and seq echoed. A malformed frame ends that connection only.
+
+Both responders answer a refused request the same way (error_status, error_answer): the CNC's EW_* code,
+except EW_PASSWD, which this surface sends as 11 (seed 002, docs/packed-protocol.md §3.5); EW_ATTRIB for a
+PMC area the surface does not define; EW_LENGTH for a payload that does not parse.
 """
 
 from __future__ import annotations
@@ -13,10 +17,12 @@ import contextlib
 import logging
 import os
 import stat
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
-from edge.focas.errors import ProtocolError
+from edge.focas import packed as pk
+from edge.focas.errors import EW_ATTRIB, EW_LENGTH, EW_PASSWD, CncError, ProtocolError
 from edge.focas.packed_frame import FrameDecoder, PackedFrame
 
 log = logging.getLogger(__name__)
@@ -24,6 +30,25 @@ log = logging.getLogger(__name__)
 # (command id, request payload) -> response payload; never raises for a CNC-side failure (answers a status).
 Responder = Callable[[int, bytes], Awaitable[bytes]]
 _READ_CHUNK = 65536
+# Requests an endpoint remembers (newest last) for tests and probes to observe. Bounded: the library host
+# serves for months, and an unbounded log grows with every request.
+REQUEST_LOG = 4096
+
+
+def error_status(error: CncError | ProtocolError) -> int:
+    """The status a server answers for a request its responder refused with `error`."""
+    if isinstance(error, CncError):
+        return pk.PACKED_EW_PASSWD if error.code == EW_PASSWD else error.code
+    if isinstance(error, pk.PmcCodeError):
+        return EW_ATTRIB
+    return EW_LENGTH
+
+
+def error_answer(command: int, status: int) -> bytes:
+    """The response payload carrying a failure: num_alm = -status for ODBALMHIS, else a lone i16 status."""
+    if command == pk.Command.RDALMHISTRY:
+        return pk.encode_alarm_history_error(status)
+    return pk.encode_status(status)
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,7 +69,7 @@ class PackedEndpoint:
     host: str = ""
     port: int = 0
     unix_path: str = ""
-    requests: list[PackedRequest] = field(default_factory=list)
+    requests: deque[PackedRequest] = field(default_factory=lambda: deque(maxlen=REQUEST_LOG))
     _sessions: dict[asyncio.Task[None], asyncio.StreamWriter] = field(default_factory=dict)
 
     @property

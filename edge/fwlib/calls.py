@@ -24,37 +24,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from edge.focas import packed as pk
-from edge.focas.errors import (
-    EW_ATTRIB,
-    EW_BUSY,
-    EW_FUNC,
-    EW_LENGTH,
-    EW_NOOPT,
-    EW_OK,
-    EW_PASSWD,
-    CncError,
-    ProtocolError,
-)
+from edge.focas.errors import EW_ATTRIB, EW_BUSY, EW_FUNC, EW_LENGTH, EW_NOOPT, EW_OK, CncError, ProtocolError
 from edge.focas.functions import PMC_ADR_TYPES
 from edge.focas.model import ActiveAlarm, ModalGCode, ParamRecord, ParamType, PmcType, SysInfo
+from edge.focas.packed_endpoint import error_answer, error_status
 from edge.fwlib import structs as st
 from edge.fwlib.library import FocasLibrary
 
 log = logging.getLogger(__name__)
-
-
-class LibraryStatus(Exception):
-    """A library call answered a non-zero EW_* code."""
-
-    def __init__(self, code: int, function: str) -> None:
-        super().__init__(f"{function} answered EW {code}")
-        self.code = code
-        self.function = function
-
-
-def surface_status(code: int) -> int:
-    """The status the packed surface sends for a library EW_* code (EW_PASSWD travels as 11)."""
-    return pk.PACKED_EW_PASSWD if code == EW_PASSWD else code
 
 
 @dataclass
@@ -72,12 +49,12 @@ class LibraryCnc:
 
     def call(self, function: str, *args: Any) -> None:
         if not self.library.has(function):
-            raise LibraryStatus(EW_FUNC, function)
+            raise CncError(EW_FUNC, function)
         code = self.library.call(function, self.handle, *args)
         if code != EW_OK:
             if is_connection_lost(code):
                 self.lost_code = code
-            raise LibraryStatus(code, function)
+            raise CncError(code, function)
 
 
 Translation = Callable[[LibraryCnc, bytes], bytes]
@@ -121,7 +98,7 @@ def _type_of(table: dict[int, ParamType], number: int, what: str) -> ParamType:
     if ptype is None:
         log.warning("%s %d has no data type in the library host's configuration; answering EW_ATTRIB",
                     what, number)
-        raise LibraryStatus(EW_ATTRIB, what)
+        raise CncError(EW_ATTRIB, what)
     return ptype
 
 
@@ -137,7 +114,7 @@ def _psd_value(psd: Any, ptype: ParamType) -> int | float:
 def _read_psd(cnc: LibraryCnc, payload: bytes, function: str, table: dict[int, ParamType]) -> bytes:
     number, axis = pk.decode_param_read(payload)
     if axis < 0:  # all axes needs the control's axis count and the *datas arrays: not translated yet
-        raise LibraryStatus(EW_ATTRIB, function)
+        raise CncError(EW_ATTRIB, function)
     ptype = _type_of(table, number, function)
     psd = st.IODBPSD()
     cnc.call(function, number, axis, psd_length(ptype), ctypes.byref(psd))
@@ -157,7 +134,7 @@ def _wrparam(cnc: LibraryCnc, payload: bytes) -> bytes:
     request = pk.decode_param_write(payload)
     ptype = _type_of(cnc.param_types, request.number, "cnc_wrparam")
     if len(request.data) != pk.param_width(ptype):
-        raise LibraryStatus(EW_LENGTH, "cnc_wrparam")
+        raise CncError(EW_LENGTH, "cnc_wrparam")
     value = request.value_as(ptype)
     psd = st.IODBPSD()
     psd.datano, psd.type = request.number, request.axis
@@ -206,7 +183,7 @@ def _pmc_buffer(data_bytes: int) -> Any:
 def _adr_type(area: str, function: str) -> int:
     code = PMC_ADR_TYPES.get(area)
     if code is None:
-        raise LibraryStatus(EW_ATTRIB, function)
+        raise CncError(EW_ATTRIB, function)
     return code
 
 
@@ -215,9 +192,9 @@ def _rdpmcrng(cnc: LibraryCnc, payload: bytes) -> bytes:
     try:
         kind = PmcType(rng.data_type)
     except ValueError:
-        raise LibraryStatus(EW_ATTRIB, "pmc_rdpmcrng") from None
+        raise CncError(EW_ATTRIB, "pmc_rdpmcrng") from None
     if rng.byte_count % kind.width:
-        raise LibraryStatus(EW_LENGTH, "pmc_rdpmcrng")
+        raise CncError(EW_LENGTH, "pmc_rdpmcrng")
     raw, pmc = _pmc_buffer(rng.byte_count)
     cnc.call("pmc_rdpmcrng", _adr_type(rng.area, "pmc_rdpmcrng"), kind, rng.start, rng.end,
              _IODBPMC_HEAD + rng.byte_count, pmc)
@@ -230,9 +207,9 @@ def _rdpmcrng(cnc: LibraryCnc, payload: bytes) -> bytes:
 def _wrpmcrng(cnc: LibraryCnc, payload: bytes) -> bytes:
     rng = pk.decode_pmc_range(payload, True, "pmc_wrpmcrng")
     if rng.data_type != PmcType.BYTE:
-        raise LibraryStatus(EW_ATTRIB, "pmc_wrpmcrng")
+        raise CncError(EW_ATTRIB, "pmc_wrpmcrng")
     if rng.byte_count > pk.PMC_MAX_WRITE:
-        raise LibraryStatus(EW_LENGTH, "pmc_wrpmcrng")
+        raise CncError(EW_LENGTH, "pmc_wrpmcrng")
     raw, pmc = _pmc_buffer(rng.byte_count)
     pmc.contents.type_a = _adr_type(rng.area, "pmc_wrpmcrng")
     pmc.contents.type_d = PmcType.BYTE
@@ -277,12 +254,12 @@ def _choose_history_version(cnc: LibraryCnc) -> int:
             continue
         try:
             _history_chunk(cnc, version, 1, 1)
-        except LibraryStatus as exc:
+        except CncError as exc:
             if exc.code in _NOT_THERE:
                 continue
             raise
         return version
-    raise LibraryStatus(EW_FUNC, "cnc_rdalmhistry")
+    raise CncError(EW_FUNC, "cnc_rdalmhistry")
 
 
 def _rdalmhistry(cnc: LibraryCnc, payload: bytes) -> bytes:
@@ -407,13 +384,6 @@ TRANSLATIONS: dict[int, Translation] = {
 }
 
 
-def error_answer(command: int, status: int) -> bytes:
-    """The answer carrying a failure: num_alm = -status for ODBALMHIS, else a lone i16 status."""
-    if command == pk.Command.RDALMHISTRY:
-        return pk.encode_alarm_history_error(status)
-    return pk.encode_status(status)
-
-
 def answer(cnc: LibraryCnc, command: int, payload: bytes) -> bytes:
     """The response payload for one request; a library failure becomes its status, never an exception."""
     translation = TRANSLATIONS.get(command)
@@ -421,14 +391,8 @@ def answer(cnc: LibraryCnc, command: int, payload: bytes) -> bytes:
         return pk.encode_status(EW_FUNC)
     try:
         return translation(cnc, payload)
-    except LibraryStatus as exc:
-        return error_answer(command, surface_status(exc.code))
-    except pk.PmcCodeError:
-        return error_answer(command, EW_ATTRIB)
-    except ProtocolError:
-        return error_answer(command, EW_LENGTH)
-    except CncError as exc:  # a value the codec refused (OutOfRange) before any call
-        return error_answer(command, surface_status(exc.code))
+    except (CncError, ProtocolError) as exc:  # the library's EW_* code, or a payload the codecs refused
+        return error_answer(command, error_status(exc))
 
 
 def is_connection_lost(code: int) -> bool:

@@ -67,7 +67,6 @@ class FocasLibrary:
 
     def __init__(self, path: str, lib: Any) -> None:
         self.path = path
-        self._lib = lib
         self._functions: dict[str, Any] = {}
         for name, argtypes in [*SIGNATURES.items(), STARTUP, EXIT]:
             function = getattr(lib, name, None)
@@ -95,11 +94,6 @@ class FocasLibrary:
     def exit(self) -> None:
         if self.has(EXIT[0]):
             self.call(EXIT[0])
-
-    @property
-    def raw(self) -> Any:
-        """The ctypes library itself (tests use it to reach the stand-in's control hooks)."""
-        return self._lib
 
 
 def python_architecture() -> str:

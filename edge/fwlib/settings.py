@@ -25,6 +25,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from edge import ConfigError
+from edge.focas.connect import Address, parse_address
 from edge.focas.model import ParamType
 from edge.focas.packed_client import PackedAddress, parse_packed_address
 from edge.fwlib.worker import CncTarget, WorkerTimeouts
@@ -51,13 +52,13 @@ class HostMachine(BaseModel):
 
     @field_validator("cnc")
     @classmethod
-    def _cnc_has_a_valid_port(cls, value: str) -> str:
-        _split_host_port(value)
+    def _cnc_is_host_port(cls, value: str) -> str:
+        _cnc_address(value)
         return value
 
     def target(self) -> CncTarget:
-        host, port = _split_host_port(self.cnc)
-        return CncTarget(self.name, host, port, {n: PARAM_TYPES[t] for n, t in self.params.items()},
+        cnc = _cnc_address(self.cnc)
+        return CncTarget(self.name, cnc.host, cnc.port, {n: PARAM_TYPES[t] for n, t in self.params.items()},
                          {n: PARAM_TYPES[t] for n, t in self.diag.items()}, self.input_decimals)
 
     def address(self) -> PackedAddress:
@@ -95,13 +96,15 @@ class HostSettings(BaseModel):
                               self.backoff_max_s)
 
 
-def _split_host_port(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":") if text.count(":") == 1 else (text, "", "")
-    if not port:
-        return text.strip("[]"), 8193
-    if not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise ValueError(f"{text!r}: expected HOST[:PORT] with a port 1..65535")
-    return host, int(port)
+def _cnc_address(text: str) -> Address:
+    """The control's FOCAS/Ethernet address, as the daemon parses one: HOST[:PORT], [v6]:PORT; 8193 by default."""
+    try:
+        address = parse_address(text)
+    except ConfigError as exc:
+        raise ValueError("; ".join(exc.problems)) from None
+    if address.is_unix:
+        raise ValueError(f"{text!r}: expected HOST[:PORT]; a CNC is reached over TCP, not a Unix socket")
+    return address
 
 
 def _is_loopback(host: str) -> bool:

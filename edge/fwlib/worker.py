@@ -6,7 +6,9 @@ A call that overruns marks that CNC unavailable and abandons its thread (a block
 interrupted; the thread frees its handle and ends if the call ever returns); a fresh thread and a fresh
 handle are opened with backoff. Other CNCs have their own threads and never wait for this one.
 
-While a CNC is unavailable every request answers EW_SOCKET (-16), which the client reports per item.
+While a CNC is unavailable every request answers EW_SOCKET (-16), which the client reports per item. A
+request whose translation fails in a way no translation expects (a bug, not a CNC answer) is logged with its
+traceback and answers EW_UNEXP (-6); the handle and the connection stay, so the next request is served.
 """
 
 from __future__ import annotations
@@ -24,13 +26,15 @@ from typing import Any
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
 from edge.focas.model import ParamType
-from edge.fwlib.calls import LibraryCnc, answer, error_answer
+from edge.focas.packed_endpoint import error_answer
+from edge.fwlib.calls import LibraryCnc, answer
 from edge.fwlib.library import FocasLibrary
 
 log = logging.getLogger(__name__)
 
 EW_SOCKET = -16  # fwlib32.h: the answer for every request while the CNC is unavailable
 UNAVAILABLE = EW_SOCKET
+EW_UNEXP = -6  # fwlib32.h's "unexpected error": the answer when a translation raises what it should not
 
 
 class ConnectFailed(Exception):
@@ -158,6 +162,10 @@ class HandleWorker:
                 self._drop("call timed out")
                 self.start()
                 return error_answer(command, UNAVAILABLE)
+            except Exception:
+                log.exception("FOCAS library host could not translate a request; answering EW_UNEXP "
+                              "machine=%s command=0x%04X", self.target.name, command)
+                reply = error_answer(command, EW_UNEXP)
             if cnc.lost_code:
                 log.warning("FOCAS library lost the CNC handle; reconnecting machine=%s ew=%d",
                             self.target.name, cnc.lost_code)

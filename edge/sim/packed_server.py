@@ -13,22 +13,24 @@ from __future__ import annotations
 
 import logging
 import struct
+from collections import deque
 from collections.abc import Callable
 
 from edge.focas import packed as pk
-from edge.focas.errors import EW_ATTRIB, EW_FUNC, EW_LENGTH, EW_PASSWD, CncError, ProtocolError
+from edge.focas.errors import EW_ATTRIB, EW_FUNC, EW_LENGTH, CncError, ProtocolError
 from edge.focas.model import ParamRecord, PmcType
-from edge.focas.packed_endpoint import PackedEndpoint, PackedRequest, start_packed_endpoint
+from edge.focas.packed_endpoint import (
+    PackedEndpoint,
+    PackedRequest,
+    error_answer,
+    error_status,
+    start_packed_endpoint,
+)
 from edge.sim.state import MachineState
 
 log = logging.getLogger(__name__)
 
 PROTOCOL = "packed"  # the name writes carry in the machine's write log
-
-
-def surface_status(error: CncError) -> int:
-    """The status this surface sends for a CNC error: EW_PASSWD is 11 here (seed 002)."""
-    return pk.PACKED_EW_PASSWD if error.code == EW_PASSWD else error.code
 
 
 # ---- one handler per command: (state, request payload) -> response payload --------------------------
@@ -166,18 +168,10 @@ def answer(state: MachineState, command: int, payload: bytes) -> bytes:
     handler = HANDLERS.get(command)
     if handler is None:
         return pk.encode_status(EW_FUNC)
-    status: int
     try:
         return handler(state, payload)
-    except CncError as exc:
-        status = surface_status(exc)
-    except pk.PmcCodeError:
-        status = EW_ATTRIB
-    except ProtocolError:
-        status = EW_LENGTH
-    if command == pk.Command.RDALMHISTRY:
-        return pk.encode_alarm_history_error(status)
-    return pk.encode_status(status)
+    except (CncError, ProtocolError) as exc:
+        return error_answer(command, error_status(exc))
 
 
 # ---- the server: the shared packed endpoint with this state behind it ---------------------------------
@@ -205,8 +199,8 @@ class PackedServer:
         return self.endpoint.unix_path
 
     @property
-    def requests(self) -> list[PackedRequest]:
-        """Every request in arrival order (tests observe chunking and counts here)."""
+    def requests(self) -> deque[PackedRequest]:
+        """The latest requests (REQUEST_LOG) in arrival order (tests observe chunking and counts here)."""
         return self.endpoint.requests
 
     @property

@@ -25,11 +25,12 @@ from edge.focas.errors import AccessDenied, CncError, OutOfRange
 from edge.focas.model import ModalGCode
 from edge.focas.packed_client import PackedClient
 from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.fwlib import calls
 from edge.fwlib import structs as st
 from edge.fwlib.host import FwlibHost, start_host
 from edge.fwlib.library import load_library
 from edge.fwlib.settings import HostSettings
-from edge.fwlib.worker import EW_SOCKET
+from edge.fwlib.worker import EW_SOCKET, EW_UNEXP
 from tests.fwlib.standin import Standin, standin_library
 from tests.helpers import async_wait_for
 
@@ -398,3 +399,21 @@ async def test_tool_number_in_use_is_cnc_modals_t_code(standin: Standin, cnc: Pa
     assert await cnc.read(it.ReadToolNumber()) == 12
     standin.set_tool(7)
     assert await cnc.read(it.ReadToolNumber()) == 7
+
+
+# ---- a programming error in a translation -----------------------------------------------------------------
+async def test_a_translation_that_raises_answers_an_error_and_the_cnc_keeps_serving(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, host: FwlibHost,
+        cnc: PackedClient) -> None:
+    def broken(library_cnc: object, payload: bytes) -> bytes:
+        raise ZeroDivisionError("a slip in the translation")
+
+    monkeypatch.setitem(calls.TRANSLATIONS, pk.Command.RDMACRO, broken)
+    with pytest.raises(CncError) as caught:
+        await cnc.read_macros(100)
+    assert caught.value.code == EW_UNEXP
+    assert "ZeroDivisionError" in caplog.text and "mill-1" in caplog.text
+    assert host.workers["mill-1"].connects == 1 and host.workers["mill-1"].available  # the handle is kept
+    await cnc.write_macro(100, 3.0)  # same connection, same handle: the next requests are served
+    monkeypatch.undo()
+    assert await cnc.read_macros(100) == [3.0]

@@ -37,6 +37,13 @@ writes:
 """
 
 
+async def native_ddata_flows(observer: Observer) -> None:
+    """Wait for a few more DDATA from m1: its native polls go on."""
+    data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
+    await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
+                         timeout=15, message="native polls going on")
+
+
 async def test_history_and_parameter_writes_go_to_the_library_host_fast_polls_stay_native(
         mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
     async with Fleet([MachineSpec(profile="30i", param_write_enabled=True)], base_port=0,
@@ -133,9 +140,7 @@ async def test_library_only_data_comes_from_the_library_host_while_fast_polls_st
             assert json.loads(json.loads(modal.payload)["value"])["13"] == "G54"
             [tool, *_] = await observer.wait_topic("focas/m1/state/Tool/Number", timeout=15)
             assert json.loads(tool.payload)["value"] in range(1, 5)
-            data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
-            await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
-                                 timeout=15, message="native polls going on")
+            await native_ddata_flows(observer)
         finally:
             daemon.request_stop()
             assert await asyncio.wait_for(task, 15) == 0
@@ -163,9 +168,7 @@ async def native_polls_go_on(mosquitto: Mosquitto, observer: Observer, tmp_path:
         try:
             await observer.wait_topic("spBv1.0/plant/DBIRTH/gw/m1", timeout=15)
             await async_wait_for(library_tried, timeout=15, message="the library host tried (again)")
-            data = len(observer.on("spBv1.0/plant/DDATA/gw/m1"))
-            await async_wait_for(lambda: len(observer.on("spBv1.0/plant/DDATA/gw/m1")) > data + 3,
-                                 timeout=15, message="native polls going on")
+            await native_ddata_flows(observer)
         finally:
             daemon.request_stop()
             assert await asyncio.wait_for(task, 15) == 0

@@ -12,6 +12,7 @@ import pytest
 
 from edge.focas import items as it
 from edge.focas import packed as pk
+from edge.focas import packed_endpoint
 from edge.focas.errors import (
     AccessDenied,
     ConnectionLost,
@@ -433,3 +434,13 @@ async def test_modal_g_codes_and_tool_number_come_from_the_simulators_packed_ser
     assert {m.group: m.code for m in modal}[13] == "G54" and {m.group for m in modal} == {
         m.group for m in state.modal_g_codes()}
     assert 1 <= tool <= 4
+
+
+async def test_the_request_log_keeps_only_the_latest_requests(monkeypatch: pytest.MonkeyPatch,
+                                                              state: MachineState) -> None:
+    monkeypatch.setattr(packed_endpoint, "REQUEST_LOG", 3)
+    async with await start_packed_server(state) as server, PackedClient(server.address) as cnc:
+        for number in range(100, 105):
+            await cnc.read_macros(number)
+        assert [pk.decode_macro_read(r.payload) for r in server.requests_for(pk.Command.RDMACRO)] == [
+            102, 103, 104]

@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
 from edge import ConfigError
 from edge.focas.model import ParamType
-from edge.fwlib.settings import load_settings
+from edge.fwlib.settings import HostMachine, load_settings
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "fwlib-host.yaml"
 
@@ -47,3 +48,17 @@ def test_duplicate_sockets_and_remote_listeners_are_refused(tmp_path: Path) -> N
     config.write_text("library: /x.so\nallow_remote: true\nmachines:\n"
                       "  - {name: c, cnc: 10.0.0.3, listen: 'tcp:192.168.1.5:18193'}\n")
     assert load_settings(config).machines[0].address().port == 18193
+
+
+@pytest.mark.parametrize(("cnc", "host", "port"), [
+    ("10.0.0.1", "10.0.0.1", 8193), ("10.0.0.1:9000", "10.0.0.1", 9000), ("[fd00::5]:8194", "fd00::5", 8194),
+])
+def test_cnc_addresses_parse_as_the_daemons_do(cnc: str, host: str, port: int) -> None:
+    machine = HostMachine(name="m", cnc=cnc, listen="unix:/run/m.sock")
+    assert (machine.target().host, machine.target().port) == (host, port)
+
+
+@pytest.mark.parametrize("cnc", ["unix:/run/cnc.sock", ":8193", "10.0.0.1:http"])
+def test_a_cnc_address_that_is_not_host_port_is_refused(cnc: str) -> None:
+    with pytest.raises(ValidationError, match="cnc"):
+        HostMachine(name="m", cnc=cnc, listen="unix:/run/m.sock")
