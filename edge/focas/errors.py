@@ -67,6 +67,8 @@ EW_MODE = 12
 EW_REJECT = 13
 EW_PASSWD = 17
 EW_BUSY = -1
+EW_UNEXP = -6  # "unexpected error"
+EW_SOCKET = -16
 
 
 def ew_name(code: int) -> str:

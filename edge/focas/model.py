@@ -23,6 +23,12 @@ class PmcType(enum.IntEnum):
     def width(self) -> int:
         return {0: 1, 1: 2, 2: 4, 4: 4, 5: 8}[int(self)]
 
+    @property
+    def struct_code(self) -> str:
+        """The element's `struct` format: bytes unsigned (bit work stays 0..255), words and longs signed
+        like FOCAS idata/ldata."""
+        return {0: "B", 1: "h", 2: "i", 4: "f", 5: "d"}[int(self)]
+
 
 class ParamType(enum.IntEnum):
     """Parameter record type codes as 0x0e/0x8d answer them (the simulator's size of a number)."""

@@ -413,13 +413,7 @@ PMC_TYPE_A: dict[str, int] = {
 PMC_AREA_BY_TYPE_A: dict[int, str] = {code: area for area, code in PMC_TYPE_A.items()}
 PMC_MAX_WRITE = 32
 _IODBPMC_HEAD = struct.Struct("<hhHH")
-_PMC_ELEMENTS: dict[PmcType, struct.Struct] = {
-    PmcType.BYTE: struct.Struct("<B"),
-    PmcType.WORD: struct.Struct("<h"),
-    PmcType.LONG: struct.Struct("<i"),
-    PmcType.FLOAT: struct.Struct("<f"),
-    PmcType.DOUBLE: struct.Struct("<d"),
-}
+_PMC_ELEMENTS: dict[PmcType, struct.Struct] = {t: struct.Struct("<" + t.struct_code) for t in PmcType}
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ from datetime import datetime
 from typing import Any, ClassVar
 
 from edge.focas import items as it
-from edge.focas.errors import CncError, ConnectionLost, FocasError, NotSupported
+from edge.focas.errors import EW_SOCKET, CncError, ConnectionLost, FocasError, NotSupported
 from edge.focas.model import Capabilities, SysInfo
 from edge.focas.session import CncSession, ItemResult
 
@@ -27,7 +27,6 @@ log = logging.getLogger(__name__)
 
 NATIVE = "native"
 LIBRARY = "fwlib-host"
-EW_SOCKET = -16  # fwlib32.h; a write refused before anything was sent: no session reset, no doubt about the CNC
 
 
 class RoutedSession(CncSession):

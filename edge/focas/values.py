@@ -141,14 +141,7 @@ def encode_scaled_list(values: Sequence[float | None]) -> bytes:
 
 # ---- PMC elements -------------------------------------------------------------------------------------
 
-# Bytes are unsigned (bit work on them must stay 0..255); words and longs are signed like FOCAS idata/ldata.
-_PMC_FORMATS: dict[PmcType, str] = {
-    PmcType.BYTE: "B",
-    PmcType.WORD: "h",
-    PmcType.LONG: "i",
-    PmcType.FLOAT: "f",
-    PmcType.DOUBLE: "d",
-}
+_PMC_FORMATS: dict[PmcType, str] = {t: t.struct_code for t in PmcType}  # a dict: this is the poll path
 
 
 def pmc_type(code: int) -> PmcType:

@@ -168,11 +168,6 @@ def _wrmacro(cnc: LibraryCnc, payload: bytes) -> bytes:
 
 # ---- PMC: IODBPMC ---------------------------------------------------------------------------------------
 _IODBPMC_HEAD = st.IODBPMC.u.offset
-_PMC_FORMAT: dict[PmcType, str] = {
-    PmcType.BYTE: "B", PmcType.WORD: "h", PmcType.LONG: "i", PmcType.FLOAT: "f", PmcType.DOUBLE: "d",
-}
-
-
 def _pmc_buffer(data_bytes: int) -> Any:
     """An IODBPMC with room for data_bytes of data (the header's array holds five elements only)."""
     size = max(ctypes.sizeof(st.IODBPMC), _IODBPMC_HEAD + data_bytes)
@@ -199,8 +194,8 @@ def _rdpmcrng(cnc: LibraryCnc, payload: bytes) -> bytes:
     cnc.call("pmc_rdpmcrng", _adr_type(rng.area, "pmc_rdpmcrng"), kind, rng.start, rng.end,
              _IODBPMC_HEAD + rng.byte_count, pmc)
     data = bytes(raw)[_IODBPMC_HEAD : _IODBPMC_HEAD + rng.byte_count]
-    values = struct.unpack(f"={rng.byte_count // kind.width}{_PMC_FORMAT[kind]}", data)
-    little = struct.pack(f"<{len(values)}{_PMC_FORMAT[kind]}", *values)  # the surface is little-endian
+    values = struct.unpack(f"={rng.byte_count // kind.width}{kind.struct_code}", data)
+    little = struct.pack(f"<{len(values)}{kind.struct_code}", *values)  # the surface is little-endian
     return pk.read_response(pk.encode_pmc_range(pk.PmcRange(rng.area, kind, rng.start, rng.end, little)))
 
 

@@ -25,6 +25,7 @@ from typing import Any
 
 from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
 
+from edge.focas.errors import EW_SOCKET, EW_UNEXP
 from edge.focas.model import ParamType
 from edge.focas.packed_endpoint import error_answer
 from edge.fwlib.calls import LibraryCnc, answer
@@ -32,9 +33,7 @@ from edge.fwlib.library import FocasLibrary
 
 log = logging.getLogger(__name__)
 
-EW_SOCKET = -16  # fwlib32.h: the answer for every request while the CNC is unavailable
-UNAVAILABLE = EW_SOCKET
-EW_UNEXP = -6  # fwlib32.h's "unexpected error": the answer when a translation raises what it should not
+UNAVAILABLE = EW_SOCKET  # the answer for every request while the CNC is unavailable
 
 
 class ConnectFailed(Exception):

@@ -91,11 +91,6 @@ def _write_pmc(state: MachineState, payload: bytes) -> bytes:
     return pk.encode_status(0)
 
 
-_PMC_LE: dict[PmcType, str] = {
-    PmcType.BYTE: "B", PmcType.WORD: "h", PmcType.LONG: "i", PmcType.FLOAT: "f", PmcType.DOUBLE: "d",
-}
-
-
 def _read_pmc(state: MachineState, payload: bytes) -> bytes:
     rng = pk.decode_pmc_range(payload, False, "pmc_rdpmcrng")
     try:
@@ -105,7 +100,7 @@ def _read_pmc(state: MachineState, payload: bytes) -> bytes:
     if rng.byte_count % kind.width:
         return pk.encode_status(EW_LENGTH)
     values = state.read_pmc(rng.area, rng.start, rng.end, kind)
-    data = struct.pack(f"<{len(values)}{_PMC_LE[kind]}", *values)
+    data = struct.pack(f"<{len(values)}{kind.struct_code}", *values)
     return pk.read_response(pk.encode_pmc_range(pk.PmcRange(rng.area, kind, rng.start, rng.end, data)))
 
 

@@ -722,9 +722,7 @@ class MachineState:
             raise cnc_error(EW_LENGTH, "pmc_rdpmcrng", message=(
                 f"{area}{start}-{area}{end} is shorter than one {kind.name} ({kind.width} bytes)"))
         raw = self.read_pmc_bytes(area, start, start + count * kind.width - 1)
-        fmt = {PmcType.BYTE: "B", PmcType.WORD: "h", PmcType.LONG: "i",
-               PmcType.FLOAT: "f", PmcType.DOUBLE: "d"}[kind]
-        return list(struct.unpack(f">{count}{fmt}", raw))
+        return list(struct.unpack(f">{count}{kind.struct_code}", raw))
 
     def write_pmc(self, area: str, start: int, data: bytes, protocol: str = "native") -> None:
         """Store 1..32 bytes at start; EW_LENGTH beyond 32 (or empty), EW_NUMBER outside the area; logged."""
