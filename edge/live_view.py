@@ -15,7 +15,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from edge.status_http import DaemonView
+from edge.daemon_view import DaemonView
 from edge.status_page import RateMeter, status_document
 
 EVENT_KINDS = ("NBIRTH", "DBIRTH", "NDEATH", "DDEATH", "STATE")

@@ -18,7 +18,7 @@ import json
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily, Metric
@@ -26,25 +26,14 @@ from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
 from edge import __version__
 from edge.collect.poller import CYCLE_BUCKETS
+from edge.daemon_view import DaemonView, spool_depth
+from edge.status_page import RateMeter, page_json, render_page, status_document
 
 log = logging.getLogger(__name__)
 
 REQUEST_TIMEOUT_S = 5.0
 MAX_HEADER_BYTES = 8192
 _REASONS = {200: "OK", 404: "Not Found", 405: "Method Not Allowed", 400: "Bad Request", 503: "Service Unavailable"}
-
-
-class DaemonView(Protocol):
-    """What the endpoint reads from the daemon (edge.daemon.Daemon provides it)."""
-
-    @property
-    def pollers(self) -> Mapping[str, Any]: ...  # machine id -> MachinePoller
-
-    @property
-    def publisher(self) -> Any: ...
-
-    @property
-    def commands(self) -> Any: ...
 
 
 # ---- health ---------------------------------------------------------------------------------------------
@@ -87,12 +76,6 @@ def assess_health(daemon: DaemonView, healthy_share: float) -> Health:
 # Publisher figures that go down as well as up are gauges, never counters (a counter that falls reads as a
 # reset). spool_rows is focas_edge_spool_depth.
 PUBLISHER_GAUGES = {"unconfirmed_batches": "live batches sent but not yet confirmed by a delivery barrier"}
-
-
-def spool_depth(daemon: DaemonView) -> int:
-    """Rows waiting in the store-and-forward spool (the disk spool's `depth`; 0 for a spool that only drops)."""
-    depth = getattr(daemon.publisher.spool, "depth", 0)
-    return int(depth() if callable(depth) else depth)
 
 
 def cycle_histogram(buckets: Sequence[int]) -> list[tuple[str, float]]:
@@ -204,8 +187,6 @@ class StatusServer:
         self.requested_port = port
         self.healthy_share = healthy_share
         self.registry = metrics_registry(daemon)
-        from edge.status_page import RateMeter
-
         self.rates = RateMeter()
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
@@ -245,8 +226,6 @@ class StatusServer:
         if route == "/metrics":
             return Response(200, CONTENT_TYPE_LATEST, generate_latest(self.registry))
         if route in ("/", "/status.json"):
-            from edge.status_page import page_json, render_page, status_document
-
             doc = status_document(self.daemon, self.rates)
             if route == "/":
                 return Response(200, "text/html; charset=utf-8", render_page(doc).encode())

@@ -25,11 +25,17 @@ from edge.samples import Sample
 
 Key = tuple[str, str, int, str]
 DEFAULT_LIMIT = 200_000  # keys kept per connection (~30 MB at worst); beyond it nothing more is recorded
+# Built once: json.dumps with options builds a new encoder per call, twice the cost of a replayed sample's key.
+_VALUE_ENCODER = json.JSONEncoder(separators=(",", ":"), sort_keys=True, default=str)
 
 
 def value_key(value: object) -> str:
     """The value as the spool stores it (JSON), so a copy that went through the spool compares equal."""
-    return json.dumps(value, separators=(",", ":"), sort_keys=True, default=str)
+    return _VALUE_ENCODER.encode(value)
+
+
+def _key(device_id: str, sample: Sample) -> Key:
+    return device_id, sample.name, sample.timestamp_ms, value_key(sample.value)
 
 
 class DeliveredValues:
@@ -52,7 +58,7 @@ class DeliveredValues:
         self._calls += 1
         call = self._calls
         for s in samples:
-            self._sent.setdefault((device_id, s.name, s.timestamp_ms, value_key(s.value)), call)
+            self._sent.setdefault(_key(device_id, s), call)
 
     def mark(self) -> int:
         """Taken just before a barrier is published: it proves what was recorded up to here."""
@@ -67,8 +73,10 @@ class DeliveredValues:
 
     def discard(self, device_id: str, samples: Iterable[Sample]) -> None:
         """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory."""
+        if not self._proven and not self._sent:
+            return
         for s in samples:
-            key = (device_id, s.name, s.timestamp_ms, value_key(s.value))
+            key = _key(device_id, s)
             self._sent.pop(key, None)
             self._proven.discard(key)
 
@@ -88,7 +96,7 @@ class DeliveredValues:
         proven, sent = self._proven, self._sent
         out = []
         for s in samples:
-            key = (device_id, s.name, s.timestamp_ms, value_key(s.value))
+            key = _key(device_id, s)
             if key not in proven and key not in sent:
                 out.append(s)
         self.skipped += len(samples) - len(out)

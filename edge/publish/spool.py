@@ -286,19 +286,13 @@ class DiskSpool:
         ids = sorted(self._acked)
         for start in range(0, len(ids), _ROOM_ROWS * 4):
             chunk = ids[start:start + _ROOM_ROWS * 4]
-            try:
-                self._delete(db, chunk)
-            except sqlite3.OperationalError as exc:
-                if not is_full(exc):
-                    raise
-                if not (self.headroom.release() and self._fits(db, chunk)):
-                    log.debug("acknowledged spool rows kept for a later delete: disk full rows=%d",
-                              len(self._acked))
-                    return
+            if not (self._try_delete(db, chunk) or (self.headroom.release() and self._try_delete(db, chunk))):
+                log.debug("acknowledged spool rows kept for a later delete: disk full rows=%d", len(self._acked))
+                return
             self._checkpoint(db, "PASSIVE")
 
-    def _fits(self, db: sqlite3.Connection, ids: list[int]) -> bool:
-        """Try the delete once more after the headroom went: True if it went through."""
+    def _try_delete(self, db: sqlite3.Connection, ids: list[int]) -> bool:
+        """Delete the rows; False when the disk is too full for the delete to be written."""
         try:
             self._delete(db, ids)
         except sqlite3.OperationalError as exc:
@@ -320,31 +314,35 @@ class DiskSpool:
             for row_id in chunk:
                 self._acked.pop(row_id, None)
 
-    def _drop_oldest(self, db: sqlite3.Connection, rows: int) -> int:
-        """Delete up to `rows` of the oldest rows by the policy (data before events); samples dropped."""
+    def _victims(self, db: sqlite3.Connection, rows: int) -> list[tuple[int, bytes]]:
+        """Up to `rows` of the oldest rows (id, body) by the drop policy: data rows first, then events."""
         victims = db.execute("SELECT id, body FROM spool WHERE kind = 'data' ORDER BY id LIMIT ?",
                              (rows,)).fetchall()
-        if not victims:
-            victims = db.execute("SELECT id, body FROM spool ORDER BY id LIMIT ?", (rows,)).fetchall()
+        return victims or db.execute("SELECT id, body FROM spool ORDER BY id LIMIT ?", (rows,)).fetchall()
+
+    def _lost_samples(self, rows: Sequence[tuple[int, bytes]]) -> int:
+        """Samples in these rows that were never delivered (an acknowledged row is gone, but not lost).
+        Ask before deleting them: the delete forgets the acknowledgement."""
+        return sum(_sample_count(bytes(body)) for row_id, body in rows if row_id not in self._acked)
+
+    def _drop_oldest(self, db: sqlite3.Connection, rows: int) -> int:
+        """Delete up to `rows` of the oldest rows by the policy (data before events); samples dropped."""
+        victims = self._victims(db, rows)
         if not victims:
             return 0
-        delivered = {r[0] for r in victims if r[0] in self._acked}  # acknowledged: gone, but not lost
+        lost = self._lost_samples(victims)
         self._delete(db, [r[0] for r in victims])
-        return sum(_sample_count(bytes(r[1])) for r in victims if r[0] not in delivered)
+        return lost
 
     def _enforce_bounds(self, db: sqlite3.Connection) -> None:
         self._enforce_age(db)
         while self.bytes > self.max_bytes and sum(self._rows.values()) > 0:
-            victim = db.execute("SELECT id, body FROM spool WHERE kind = 'data' ORDER BY id LIMIT 64").fetchall()
-            if not victim:
-                victim = db.execute("SELECT id, body FROM spool ORDER BY id LIMIT 64").fetchall()
             dropped = 0
-            for row_id, body in victim:
+            for victim in self._victims(db, 64):
                 if self.bytes <= self.max_bytes:
                     break
-                lost = row_id not in self._acked
-                self._delete(db, [row_id])
-                dropped += _sample_count(bytes(body)) if lost else 0
+                dropped += self._lost_samples([victim])
+                self._delete(db, [victim[0]])
             self._count_drops(dropped, "size")
         if not sum(self._rows.values()):
             self._end_episode()
@@ -354,9 +352,9 @@ class DiskSpool:
         rows = db.execute("SELECT id, body FROM spool WHERE created < ? ORDER BY id", (cutoff,)).fetchall()
         if not rows:
             return
-        lost = [r for r in rows if r[0] not in self._acked]
+        lost = self._lost_samples(rows)
         self._delete(db, [r[0] for r in rows])
-        self._count_drops(sum(_sample_count(bytes(r[1])) for r in lost), "age")
+        self._count_drops(lost, "age")
 
     def _count_drops(self, samples: int, reason: str) -> None:
         """Count dropped samples; one WARNING when an episode of drops starts (it ends when the spool drains)."""

@@ -71,7 +71,14 @@ class Headroom:
         self.held = False
 
     def take(self) -> bool:
-        """Reserve the bytes (written, not sparse); False on a disk too full to hold them."""
+        """Reserve the bytes (written, not sparse); False on a disk too full to hold them.
+
+        The spool asks again after every write while the bytes are given back: on a disk with less free
+        than `size` it is told no at the cost of a statvfs, not of writing the free bytes and deleting them.
+        """
+        if self.disk_free() < self.size:
+            self.held = False
+            return False
         try:
             with self.path.open("wb") as handle:
                 handle.write(b"\0" * self.size)
