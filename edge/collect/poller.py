@@ -15,6 +15,7 @@ import contextlib
 import enum
 import json
 import logging
+import math
 import operator
 import random
 import time
@@ -185,6 +186,7 @@ class MachinePoller:
         history_store = WatermarkStore(state_dir, machine.id)
         self._history = AlarmHistoryDedup(history_store)
         self._dropped: dict[str, float] = {}  # operation -> monotonic time it was dropped (this session)
+        self._retry_at = math.inf  # when the earliest drop is due to be tried again (one compare per tick)
         self._retrying: set[str] = set()  # put back in the plan, not answered yet (still listed as dropped)
         self._unsupported_ops: set[str] = set()  # planned, but the transport has no form for them (never retried)
         self._warned_dropped: set[str] = set()  # drops already logged at WARNING (once per daemon run)
@@ -301,6 +303,7 @@ class MachinePoller:
             plan = plan.without(operation)
         self._full_plan = self._plan = plan
         self._dropped.clear()  # a new session asks for every function again
+        self._retry_at = math.inf
         self._retrying.clear()
         schedule = pl.Schedule(plan.periods)
         schedule.start(time.monotonic())
@@ -330,7 +333,7 @@ class MachinePoller:
             self.stats.skipped = schedule.skipped
             if not groups:
                 continue
-            if self._dropped:
+            if started >= self._retry_at:
                 self._retry_dropped(started)
             plan = self._plan or plan
             tick = await self._tick(plan, groups)
@@ -458,11 +461,13 @@ class MachinePoller:
 
     def _retry_dropped(self, now: float) -> None:
         """Put functions dropped `poll.retry_dropped` ago back in the plan (listed as dropped until they answer)."""
-        due = [op for op, when in self._dropped.items() if now - when >= self.machine.poll.retry_dropped]
-        if not due or self._full_plan is None:
-            return
+        period = self.machine.poll.retry_dropped
+        due = [op for op, when in self._dropped.items() if now - when >= period]
         for operation in due:
             del self._dropped[operation]
+        self._retry_at = min(self._dropped.values(), default=math.inf) + period
+        if not due or self._full_plan is None:
+            return
         self._retrying.update(due)
         plan = self._full_plan
         for operation in self._dropped:
@@ -537,7 +542,8 @@ class MachinePoller:
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = pl.drop_key(read.item)
             if operation not in self._dropped:
-                self._dropped[operation] = time.monotonic()
+                self._dropped[operation] = now = time.monotonic()
+                self._retry_at = min(self._retry_at, now + self.machine.poll.retry_dropped)
                 self._retrying.discard(operation)
                 self._plan = self._plan.without(operation)
                 again = operation in self._warned_dropped
