@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 from edge.focas.model import PMC_AREAS, PmcType
 from edge.focas.paths import MAX_PATHS
+from edge.focas.values import ALL_AXES
 
 
 class TargetError(ValueError):
@@ -135,7 +136,6 @@ _INT = r"(\d{1,9})"
 _MACRO_RE = re.compile(rf"{_INT}(?:-{_INT})?", re.ASCII)
 _PMC_RE = re.compile(rf"([A-Za-z]){_INT}(?:-([A-Za-z])?{_INT})?(?:\.(\w+))?", re.ASCII)
 _NUMBERED_RE = re.compile(rf"{_INT}(?:-{_INT})?(?:/(\d{{1,9}}|all))?(?:\.{_INT})?", re.ASCII | re.IGNORECASE)
-ALL_AXES = -1  # `/all`: every axis at once (the FOCAS axis argument -1)
 
 
 def parse_target(text: str) -> Target:

@@ -14,10 +14,10 @@ from typing import Any
 from edge.config import MachineConfig
 from edge.focas import items as it
 from edge.focas.errors import EW_ATTRIB, EW_NUMBER, OutOfRange
+from edge.focas.values import ALL_AXES
 
 log = logging.getLogger(__name__)
 
-ALL_AXES = -1
 AXIS_TYPE_REFUSALS = frozenset({EW_ATTRIB, EW_NUMBER})
 
 NumberRead = it.ReadParams | it.ReadDiag

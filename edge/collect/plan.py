@@ -21,10 +21,10 @@ from typing import Any
 from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
+from edge.focas.values import ALL_AXES
 from edge.samples import MetricSpec, MetricType
 
 PART_COUNT_PARAM = 6711
-ALL_AXES = -1  # the FOCAS axis argument reading every axis at once
 
 
 class Group(enum.Enum):

@@ -17,6 +17,7 @@ from edge.focas import items as it
 from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.packed import to_scaled
 from edge.focas.session import CncSession
+from edge.focas.values import ALL_AXES
 from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 INTEGER_PMC_TYPES = (PmcType.BYTE, PmcType.WORD, PmcType.LONG)
@@ -56,7 +57,7 @@ def check_param(op: WriteOp, record: ParamRecord) -> None:
     """The value must fit the parameter's type as the CNC reports it; a per-axis one needs its axis."""
     target = op.target
     assert isinstance(target, ParamTarget)
-    if record.axis == -1 and target.axis == 0:
+    if record.axis == ALL_AXES and target.axis == 0:
         raise CommandRefused(ErrorCode.INVALID_TARGET, f"{target}: parameter {target.first} is per axis; "
                              f"address one axis, e.g. param:{target.first}/1")
     if target.bit is not None:

@@ -51,6 +51,7 @@ from edge.focas.model import (
     TimerValue,
 )
 from edge.focas.values import (
+    ALL_AXES,
     SlotForm,
     c_string,
     decode_pmc,
@@ -599,7 +600,6 @@ BY_COMMAND: dict[tuple[int, int], Function] = {(f.cls, f.command): f for f in FU
 POSITION_TYPES = {"absolute": 4, "machine": 1, "relative": 6, "distance": 7}
 PMC_ADR_TYPES = {letter: code for code, letter in enumerate(PMC_AREAS)}  # G0 F1 Y2 X3 A4 R5 T6 K7 C8 D9 ...
 ALARM_TEXT_LEN = 64
-ALL_AXES = -1
 
 
 def pmc_adr_type(area: str) -> int:

@@ -178,7 +178,7 @@ class SlotForm(enum.IntEnum):
 
 
 RECORD_HEAD_LAYOUT = struct.Struct(">ihh")
-ALL_AXES = -1
+ALL_AXES = -1  # the FOCAS axis argument that reads or writes every axis at once
 
 
 def record_stride(max_axis: int, form: SlotForm) -> int:

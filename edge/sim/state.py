@@ -54,6 +54,7 @@ from edge.focas.model import (
     SysInfo,
     TimerValue,
 )
+from edge.focas.values import ALL_AXES
 from edge.sim.profiles import Profile, get_profile
 
 TOOL_OFFSET_COUNT = 64  # offsets the simulated control keeps per kind
@@ -831,7 +832,7 @@ class MachineState:
             stored = _checked_value(spec, value)
             values = self._params[number]
             if spec.per_axis:
-                if axis == -1:
+                if axis == ALL_AXES:
                     slots = list(range(len(values)))
                 elif 1 <= axis <= len(values):
                     slots = [axis - 1]
