@@ -42,7 +42,7 @@ from edge.config_merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.focas.paths import MAX_PATHS
-from edge.targets import (
+from edge.focas.targets import (
     ALL_AXES,
     MAX_AXIS,
     MAX_MACRO,

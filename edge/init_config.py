@@ -1,6 +1,6 @@
 """A first config written from what the machines themselves answered (`focas-edge init`).
 
-Each CNC is probed read-only (edge.probe: one request per function, nothing written), and its poll plan
+Each CNC is probed read-only (edge.focas.probe: one request per function, nothing written), and its poll plan
 keeps only what that control answered with data: the position kinds, the part count (parameter 6711),
 the probe's macro range, PMC F-area bytes and machine-position diagnosis. The status period is the
 shortest of 0.5/1/2/5 s at which the status group's measured round trips take at most a fifth of it,
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from edge.focas.connect import parse_address
 from edge.focas.items import POSITION_KINDS
-from edge.probe import PROBE_DIAG, PROBE_MACROS, PROBE_PARAM, PROBE_PMC, ProbeReport
+from edge.focas.probe import PROBE_DIAG, PROBE_MACROS, PROBE_PARAM, PROBE_PMC, ProbeReport
 
 STATUS_PERIODS_S = (0.5, 1.0, 2.0, 5.0)
 STATUS_SHARE = 0.2  # the status group's round trips may take at most this share of its period

@@ -79,8 +79,8 @@ def _broker(text: str) -> tuple[str, int]:
 
 async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
     from edge.focas.connect import open_session, parse_address
+    from edge.focas.probe import probe
     from edge.init_config import ProbedMachine
-    from edge.probe import probe
 
     async def one(address: str, machine_id: str) -> ProbedMachine:
         parsed = parse_address(address, default_port=8193 if args.transport == "focas" else 18193)

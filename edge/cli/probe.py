@@ -47,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def handle(args: argparse.Namespace) -> int:
     from edge.focas.connect import open_session
-    from edge.probe import probe, report_json, report_lines
+    from edge.focas.probe import probe, report_json, report_lines
 
     if args.timeout <= 0:
         print(f"focas-edge probe: --timeout must be positive, got {args.timeout:g}", file=sys.stderr)

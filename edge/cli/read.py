@@ -1,6 +1,6 @@
 """`focas-edge read HOST[:PORT] ITEM...`: read items from one CNC in one batched request and print them.
 
-Items use the target grammar of edge.targets (macro:500-505, param:1815/1, pmc:D2204.word, sysinfo ...).
+Items use the target grammar of edge.focas.targets (macro:500-505, param:1815/1, pmc:D2204.word, sysinfo ...).
 A readable table by default; `--json` prints one JSON object per item per line: {item, value, error}.
 Exit 0 when every item was read, 1 when any item (or the connection) failed, 2 on bad usage.
 """
@@ -23,7 +23,7 @@ from edge.collect.axis_numbers import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
 from edge.focas.model import ParamRecord
-from edge.targets import (
+from edge.focas.targets import (
     ALL_AXES,
     DiagTarget,
     MacroTarget,

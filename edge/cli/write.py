@@ -38,7 +38,7 @@ from edge.command.requests import WriteOp, pmc_bytes
 from edge.command.target_io import check_param, expected_macro, param_record, read_item, write_target
 from edge.focas.errors import FocasError
 from edge.focas.model import PmcType
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
+from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment
 
 # PMC areas whose signals another party owns: a write there changes what the ladder believes.
 GUARDED_AREAS = {

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from edge.collect.plan import MachinePlan, PlannedRead
 from edge.command.requests import WriteOp
 from edge.focas import items as it
-from edge.targets import ALL_AXES, MacroTarget, ParamTarget, PmcTarget, WritableTarget
+from edge.focas.targets import ALL_AXES, MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 
 def metric_target(plan: MachinePlan, name: str) -> WritableTarget | None:

@@ -30,8 +30,8 @@ from edge.command.errors import CommandRefused, ErrorCode, code_for, refused_by_
 from edge.command.requests import WriteOp
 from edge.command.results import WriteResult
 from edge.focas.errors import ConnectionLost, FocasError, FocasTimeout, ProtocolError
+from edge.focas.targets import MacroTarget, ParamTarget
 from edge.samples import Sample
-from edge.targets import MacroTarget, ParamTarget
 
 if TYPE_CHECKING:
     from edge.collect.poller import MachinePoller

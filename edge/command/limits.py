@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.focas.model import PmcType, SysInfo
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
+from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 # FANUC custom macro variables: #1-#33 local (belong to the running program), #100-#199/#500-#999 common,
 # #1000 and up system variables (offsets, interface signals...). #0 is <vacant> and read-only; #34-#99 do

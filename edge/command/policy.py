@@ -12,7 +12,7 @@ from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import WriteOp
 from edge.command.signedness import PMC_READINGS, Reading
 from edge.config import AllowRule, RateLimit, WritePolicy
-from edge.targets import PmcTarget
+from edge.focas.targets import PmcTarget
 
 
 def authorise(op: WriteOp, policy: WritePolicy) -> bool:

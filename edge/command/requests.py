@@ -4,7 +4,7 @@
     {"target": "macro:500@2", "value": 1.5}                      on path 2 (or "path": 2; both must agree)
     [{"id": "a", "target": "macro:500", "value": 1.25}, {...}]   several, applied in order
 
-`WriteRequest` (pydantic) checks the shape, the target grammar (edge.targets, shared with the CLI and the
+`WriteRequest` (pydantic) checks the shape, the target grammar (edge.focas.targets, shared with the CLI and the
 allow-list) and that the value fits the target's type and width; it yields a `WriteOp`, the plain value
 the executor carries out. Every refusal has a reply code (edge.command.errors) as its pydantic error type.
 """
@@ -32,7 +32,7 @@ from pydantic_core import PydanticCustomError
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.signedness import PMC_READINGS
 from edge.focas.model import PmcType
-from edge.targets import (
+from edge.focas.targets import (
     MAX_PATH,
     MacroTarget,
     ParamTarget,

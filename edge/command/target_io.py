@@ -17,8 +17,8 @@ from edge.focas import items as it
 from edge.focas.model import ParamRecord, ParamType, PmcType
 from edge.focas.packed import to_scaled
 from edge.focas.session import CncSession
+from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 from edge.focas.values import ALL_AXES
-from edge.targets import MacroTarget, ParamTarget, PmcTarget, WritableTarget
 
 INTEGER_PMC_TYPES = (PmcType.BYTE, PmcType.WORD, PmcType.LONG)
 

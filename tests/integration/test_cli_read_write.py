@@ -17,10 +17,10 @@ import pytest
 
 from edge.cli import main
 from edge.cli.named_reads import NAMED_READS, TIMER_KINDS
+from edge.focas.targets import READ_NAMES
 from edge.sim.native_server import NativeServer
 from edge.sim.packed_server import PackedServer, start_packed_server
 from edge.sim.state import MachineState
-from edge.targets import READ_NAMES
 from tests.helpers import free_port
 
 pytestmark = pytest.mark.integration

@@ -15,7 +15,7 @@ from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.errors import EW_PATH, CncError
 from edge.focas.paths import path_count
-from edge.probe import probe
+from edge.focas.probe import probe
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

@@ -11,7 +11,7 @@ from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main
 from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.packed_client import PackedClient
-from edge.probe import Outcome, ProbeReport, ProbeStep, probe, probe_items
+from edge.focas.probe import Outcome, ProbeReport, ProbeStep, probe, probe_items
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import free_port
 

@@ -16,8 +16,8 @@ from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.errors import AccessDenied, FocasError, FocasTimeout
 from edge.focas.model import Capabilities, PmcType
+from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget
 from edge.samples import Sample
-from edge.targets import MacroTarget, ParamTarget, PmcTarget
 
 
 class MemorySession:

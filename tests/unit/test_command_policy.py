@@ -13,7 +13,7 @@ from edge.command.requests import make_op
 from edge.command.target_io import check_param
 from edge.config import AllowRule, RateLimit, WritePolicy
 from edge.focas.model import ParamRecord, ParamType
-from edge.targets import MacroTarget, parse_writable
+from edge.focas.targets import MacroTarget, parse_writable
 
 
 def policy(*rules: AllowRule, enabled: bool = True) -> WritePolicy:

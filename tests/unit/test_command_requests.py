@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import make_op, parse_request, pmc_bytes
 from edge.focas.model import PmcType
-from edge.targets import MacroTarget, PmcTarget, parse_writable
+from edge.focas.targets import MacroTarget, PmcTarget, parse_writable
 
 
 def item(body: object) -> tuple[ErrorCode | None, object]:

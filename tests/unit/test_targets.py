@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.focas.model import PmcType
-from edge.targets import (
+from edge.focas.targets import (
     DiagTarget,
     MacroTarget,
     NamedTarget,
