@@ -13,7 +13,7 @@ from typing import Any
 from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
 from edge.config import Config, load_config
-from edge.service_access import SERVICE_USER, service_problems, state_dir_problem
+from edge.config.service_access import SERVICE_USER, service_problems, state_dir_problem
 
 
 def register(subparsers: Any) -> None:

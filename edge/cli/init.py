@@ -53,7 +53,7 @@ def _usage(message: str) -> int:
 def _ids(args: argparse.Namespace) -> list[str]:
     """The machine ids, checked; ValueError says what is wrong."""
     from edge.config import check_sparkplug_id
-    from edge.init_config import machine_id_for
+    from edge.config.init_writer import machine_id_for
 
     if args.names is None:
         ids = [machine_id_for(address) for address in args.addresses]
@@ -78,9 +78,9 @@ def _broker(text: str) -> tuple[str, int]:
 
 
 async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
+    from edge.config.init_writer import ProbedMachine
     from edge.focas.connect import open_session, parse_address
     from edge.focas.probe import probe
-    from edge.init_config import ProbedMachine
 
     async def one(address: str, machine_id: str) -> ProbedMachine:
         parsed = parse_address(address, default_port=8193 if args.transport == "focas" else 18193)
@@ -93,7 +93,7 @@ async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from edge.init_config import render_config
+    from edge.config.init_writer import render_config
 
     if args.timeout <= 0:
         return _usage(f"--timeout must be positive, got {args.timeout:g}")
@@ -101,7 +101,7 @@ def handle(args: argparse.Namespace) -> int:
     if output is not None and output.exists() and not args.force:
         return _usage(f"{output} exists; use --force to overwrite it")
     if args.units is not None:
-        from edge.bundle import write_bundled
+        from edge.config.bundled import write_bundled
 
         try:
             units = write_bundled("systemd", Path(args.units), overwrite=args.force)

@@ -8,7 +8,7 @@ import pytest
 
 from edge import ConfigError
 from edge.config import Config, parse_config
-from edge.config_merge import expand_machines
+from edge.config.merge import expand_machines
 
 FLEET = """
 mqtt: {host: broker, sparkplug: {group_id: g, edge_node_id: n}}

@@ -14,11 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from edge import service_access
-from edge.bundle import bundled
 from edge.cli import main
-from edge.config import parse_config
-from edge.service_access import Account, lookup_account, service_problems, state_dir_problem
+from edge.config import parse_config, service_access
+from edge.config.bundled import bundled
+from edge.config.service_access import Account, lookup_account, service_problems, state_dir_problem
 from tests.unit.test_config import MINIMAL
 
 REPO = Path(__file__).resolve().parents[2]

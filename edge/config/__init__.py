@@ -37,8 +37,8 @@ from pydantic import (
 )
 
 from edge import ConfigError
-from edge.config_lines import with_lines
-from edge.config_merge import expand_machines
+from edge.config.lines import with_lines
+from edge.config.merge import expand_machines
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.focas.paths import MAX_PATHS
