@@ -11,7 +11,7 @@ from pathlib import Path
 from pyinstrument import Profiler
 from pyinstrument.renderers import ConsoleRenderer
 
-from edge.daemon import run_daemon
+from edge.service.daemon import run_daemon
 
 
 def main() -> int:

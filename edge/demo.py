@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from edge.config import Config, MachineConfig, load_config
-from edge.daemon import Daemon
 from edge.live_view import LiveView
-from edge.logformat import configure_logging
+from edge.service.daemon import Daemon
+from edge.service.logformat import configure_logging
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.state import CycleSpec
 from edge.watch import Watcher

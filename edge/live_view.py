@@ -15,8 +15,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from edge.daemon_view import DaemonView
-from edge.status_page import RateMeter, status_document
+from edge.service.daemon_view import DaemonView
+from edge.service.status_page import RateMeter, status_document
 
 EVENT_KINDS = ("NBIRTH", "DBIRTH", "NDEATH", "DDEATH", "STATE")
 SHOWN_VALUES = (("Status/Run", ""), ("Program/Number", "O"), ("Spindle/1/Speed", "S "), ("Counters/Parts", "parts "))

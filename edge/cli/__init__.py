@@ -10,7 +10,7 @@ import importlib
 import sys
 
 from edge import __version__
-from edge.logformat import LOG_FORMATS, configure_logging
+from edge.service.logformat import LOG_FORMATS, configure_logging
 
 # Subcommand modules in the order `--help` lists them. Each defines
 #   register(subparsers) -> None   adding its parser with set_defaults(func=handler)

@@ -54,7 +54,7 @@ def handle(args: argparse.Namespace) -> int:
 async def serve(settings: Any, library: Any) -> int:
     """Serve until SIGINT/SIGTERM; tell systemd READY=1 once every endpoint listens."""
     from edge.fwlib.host import start_host
-    from edge.sdnotify import SystemdNotifier
+    from edge.service.sdnotify import SystemdNotifier
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

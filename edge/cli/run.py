@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def handle(args: argparse.Namespace) -> int:
-    from edge.daemon import run_daemon
+    from edge.service.daemon import run_daemon
 
     try:
         return run_daemon(args.config)

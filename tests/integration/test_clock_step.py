@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

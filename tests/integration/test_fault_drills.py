@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, Machine, MachineSpec
 from edge.sim.native_server import ServerStats
 from tests.helpers import Mosquitto, async_wait_for

@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.focas import packed as pk
 from edge.fwlib.host import FwlibHost, start_host
 from edge.fwlib.library import load_library
 from edge.fwlib.settings import HostSettings
 from edge.publish.sparkplug_b_pb2 import Payload
+from edge.service.daemon import Daemon
 from tests.fwlib.standin import Standin, standin_library
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

@@ -16,10 +16,10 @@ import pytest
 
 from edge.cli import EXIT_OK, main
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.focas import packed as pk
 from edge.focas.model import SysInfo
 from edge.focas.packed_endpoint import start_packed_endpoint
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

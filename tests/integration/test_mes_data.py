@@ -10,12 +10,12 @@ import pytest
 
 from edge.cli import main
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.errors import EW_PATH, CncError
 from edge.focas.paths import path_count
 from edge.focas.probe import probe
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.publish.payload import METRIC_TYPE
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.profiles import PROFILES
 from tests.helpers import Mosquitto

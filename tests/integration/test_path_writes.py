@@ -12,7 +12,7 @@ import pytest
 from edge.cli import main
 from edge.cli.read import EXIT_USAGE
 from edge.config import parse_config
-from edge.daemon import Daemon
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

@@ -10,7 +10,7 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 from edge.config import parse_config
-from edge.daemon import Daemon
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for, free_port, port_open
 

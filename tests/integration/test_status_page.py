@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for, free_port, port_open
 from tests.integration.test_status_http import config_text, http_get

@@ -24,13 +24,13 @@ from pathlib import Path
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.publish import payload as pl
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.json_topics import GATEWAY, OFFLINE
 from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
 from edge.samples import MetricType, Sample
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.delivery import (

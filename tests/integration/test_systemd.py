@@ -18,11 +18,11 @@ from pathlib import Path
 import pytest
 
 from edge.config import MachineConfig, parse_config
-from edge.daemon import Daemon
 from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.session import ItemResult
-from edge.sdnotify import SystemdNotifier
+from edge.service.daemon import Daemon
+from edge.service.sdnotify import SystemdNotifier
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.test_signals import DaemonProcess, daemon_config

@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 
 from edge.config import parse_config
-from edge.daemon import Daemon
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
+from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, Machine, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config

@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import IO
 
 from edge.config import load_config
-from edge.daemon import Daemon
 from edge.samples import Sample
+from edge.service.daemon import Daemon
 
 REPORT_EVERY_S = 5.0
 

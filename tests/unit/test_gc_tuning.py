@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import gc
 
-from edge.gc_tuning import YOUNG_THRESHOLD, tune_collector
+from edge.service.gc_tuning import YOUNG_THRESHOLD, tune_collector
 
 
 def test_tuning_freezes_start_up_and_raises_only_the_young_threshold() -> None:

@@ -1,5 +1,5 @@
 """The optional local HTTP endpoint: `/healthz` for a load balancer or a probe, `/metrics` for Prometheus,
-and a status page for people at `/` (edge.status_page, which polls `/status.json`).
+and a status page for people at `/` (edge.service.status_page, which polls `/status.json`).
 
 Off by default (`http: {enabled: true}` turns it on; it binds 127.0.0.1:9108 unless told otherwise).
 A tiny HTTP/1.1 server on the daemon's own event loop: a scrape reads the live poller and publisher
@@ -26,8 +26,8 @@ from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
 from edge import __version__
 from edge.collect.poller import CYCLE_BUCKETS
-from edge.daemon_view import DaemonView, spool_depth
-from edge.status_page import RateMeter, page_json, render_page, status_document
+from edge.service.daemon_view import DaemonView, spool_depth
+from edge.service.status_page import RateMeter, page_json, render_page, status_document
 
 log = logging.getLogger(__name__)
 

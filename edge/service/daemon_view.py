@@ -1,4 +1,4 @@
-"""What the status endpoint, the status page and the live view read from the daemon (edge.daemon.Daemon
+"""What the status endpoint, the status page and the live view read from the daemon (edge.service.daemon.Daemon
 provides it): one protocol, so the page and the endpoint that serves it need not import each other."""
 
 from __future__ import annotations

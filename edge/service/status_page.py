@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from edge import __version__
-from edge.daemon_view import DaemonView, spool_depth
+from edge.service.daemon_view import DaemonView, spool_depth
 
 LIVE_VALUE_PREFIXES = ("Status/Run", "Status/Mode", "Program/Number", "Spindle/1/Speed", "Feed/Actual",
                        "Counters/Parts")
