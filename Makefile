@@ -25,7 +25,7 @@ venv: $(STAMP)
 ## make run: a simulated fleet, a broker (system one, or an embedded one), the daemon and a compact live view
 ## (make run RAW=1, or ARGS=--raw: every message decoded). The demo's state lives in .state/ (untracked).
 run: $(RUN_STAMP)
-	$(PY) -m edge.demo $(if $(RAW),--raw) $(ARGS)
+	$(PY) -m edge.cli.views.demo $(if $(RAW),--raw) $(ARGS)
 
 ## make test: lint, then the whole suite (unit + integration with a real mosquitto)
 test: $(STAMP) broker-check browser-check lint

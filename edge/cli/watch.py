@@ -75,7 +75,7 @@ def watch_plan(args: argparse.Namespace) -> WatchPlan:
 
 
 def handle(args: argparse.Namespace) -> int:
-    from edge.watch import Watcher
+    from edge.cli.views.watch import Watcher
 
     try:
         plan = watch_plan(args)

@@ -1,4 +1,4 @@
-"""`make run` acceptance: `python -m edge.demo` reaches live data within a minute, with no broker (an embedded
+"""`make run` acceptance: `python -m edge.cli.views.demo` reaches live data within a minute, with no broker (an embedded
 amqtt broker starts) and with one (the suite's mosquitto), and Ctrl-C stops it cleanly. By default it shows the
 compact view (a line per machine, a tail of events); `--raw` shows every message decoded."""
 
@@ -46,7 +46,7 @@ class Demo:
 
     async def start(self, config: Path, *flags: str) -> None:
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "edge.demo", "--duration", "90", "--config", str(config), *flags,
+            sys.executable, "-m", "edge.cli.views.demo", "--duration", "90", "--config", str(config), *flags,
             cwd=REPO, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
         self._reader = asyncio.create_task(self._read())
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 from typing import Any
 
-from edge.live_view import LiveView, is_event, machine_line
+from edge.cli.views.live_view import LiveView, is_event, machine_line
 
 
 class FixedView(LiveView):

@@ -24,12 +24,12 @@ def test_make_run_installs_the_package_and_the_demo_broker_only(tmp_path: Path) 
     commands = dry_run("run", tmp_path)
     installs = [line for line in commands.splitlines() if "pip install" in line]
     assert installs == [f"{tmp_path / 'venv'}/bin/python -m pip install --quiet -e '.[demo]'"], commands
-    assert "-m edge.demo" in commands and "--raw" not in commands
+    assert "-m edge.cli.views.demo" in commands and "--raw" not in commands
 
 
 def test_make_run_raw_is_one_variable_away(tmp_path: Path) -> None:
-    assert "-m edge.demo --raw" in dry_run("run", tmp_path, "RAW=1")
-    assert "-m edge.demo  --raw" in dry_run("run", tmp_path, "ARGS=--raw")
+    assert "-m edge.cli.views.demo --raw" in dry_run("run", tmp_path, "RAW=1")
+    assert "-m edge.cli.views.demo  --raw" in dry_run("run", tmp_path, "ARGS=--raw")
 
 
 def test_make_test_still_installs_everything_and_sets_up_broker_and_browser(tmp_path: Path) -> None:

@@ -8,10 +8,10 @@ from datetime import UTC, datetime
 from hypothesis import given
 from hypothesis import strategies as st
 
+from edge.cli.views.watch import SparkplugDecoder, json_lines
 from edge.publish import payload as pl
 from edge.publish.sparkplug_b_pb2 import Payload
 from edge.samples import MetricType, Quality
-from edge.watch import SparkplugDecoder, json_lines
 
 TS = int(datetime(2026, 3, 1, 12, 30, 45, 250_000, tzinfo=UTC).timestamp() * 1000)
 DBIRTH = "spBv1.0/plant/DBIRTH/gw/mill-1"

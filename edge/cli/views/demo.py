@@ -19,15 +19,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from edge.cli.views.live_view import LiveView
+from edge.cli.views.watch import Watcher
 from edge.config import Config, MachineConfig, load_config
-from edge.live_view import LiveView
 from edge.service.daemon import Daemon
 from edge.service.logformat import configure_logging
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.state import CycleSpec
-from edge.watch import Watcher
 
-log = logging.getLogger("edge.demo")
+log = logging.getLogger("edge.cli.views.demo")
 
 PROFILES = ("30i", "16i", "0i-F")
 MULTI_PATH_PROFILE = "31i-2p"  # for a machine configured with paths: 2 (a twin-turret lathe)
@@ -140,7 +140,7 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m edge.demo", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m edge.cli.views.demo", description=__doc__)
     parser.add_argument("--config", type=Path, default=Path("config/edge.yaml"))
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--log-level", default="WARNING")
