@@ -52,7 +52,7 @@ def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[l
             (device, metric, code, reason))
         await pub.device_online("m1", SPECS, [])
         for msg in messages:
-            (pub._spb_message if fmt == "sparkplug" else pub._json_message)(msg)
+            (pub._spb.handle_message if fmt == "sparkplug" else pub._json.handle_message)(msg)
         await asyncio.sleep(0)
         await pub.stop()
         return pub
