@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import parse_request
+from edge.publish import CommandSource, Publisher
 from edge.publish.mqtt import InboundMessage
-from edge.publish.publisher import CommandSource, Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType
