@@ -11,7 +11,7 @@ from pathlib import Path
 
 from edge import ConfigError
 from edge.cli import EXIT_USAGE
-from edge.publish.settings import PublishSettings
+from edge.publish import PublishSettings
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 1883

@@ -30,7 +30,7 @@ from edge.focas.model import SysInfo
 
 if TYPE_CHECKING:
     from edge.collect.poller import MachinePoller
-    from edge.publish.publisher import CommandSource, Publisher
+    from edge.publish import CommandSource, Publisher
 
 log = logging.getLogger(__name__)
 

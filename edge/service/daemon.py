@@ -22,9 +22,7 @@ from edge.collect.tickgrid import TickGrid
 from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.config.service_access import state_dir_problem
-from edge.publish.publisher import Publisher
-from edge.publish.settings import PublishSettings
-from edge.publish.spool import open_spool
+from edge.publish import Publisher, PublishSettings, open_spool
 from edge.samples import MetricType, Sample
 from edge.service.gc_tuning import tune_collector
 from edge.service.sdnotify import SystemdNotifier

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import parse_request
+from edge.publish import CommandSource, Publisher
 from edge.publish.mqtt import InboundMessage
-from edge.publish.publisher import CommandSource, Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType
@@ -52,7 +52,7 @@ def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[l
             (device, metric, code, reason))
         await pub.device_online("m1", SPECS, [])
         for msg in messages:
-            (pub._spb_message if fmt == "sparkplug" else pub._json_message)(msg)
+            (pub._spb.handle_message if fmt == "sparkplug" else pub._json.handle_message)(msg)
         await asyncio.sleep(0)
         await pub.stop()
         return pub
