@@ -13,11 +13,12 @@ from edge import ConfigError
 from edge.collect.plan import Group, MachinePlan, StaticInfo, drop_key, metric_values
 from edge.config import parse_config
 from edge.focas import items as it
-from edge.focas import native, packed_client
+from edge.focas import native
 from edge.focas import packed as pk
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
 from edge.focas.model import ModalGCode
+from edge.focas.packed import client as packed_client
 from edge.focas.values import SlotForm
 from edge.samples import MetricType
 from edge.sim import packed_server
