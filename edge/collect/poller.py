@@ -37,8 +37,8 @@ from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
 from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
+from edge.collect.settings import MachineSettings
 from edge.collect.tickgrid import TickGrid
-from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.connect import open_session
 from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
@@ -151,10 +151,10 @@ class TickBatch:
                    tuple(extractor(r) for r in reads), where, previous, range(len(reads)))
 
 
-SessionFactory = Callable[[MachineConfig], CncSession]
+SessionFactory = Callable[[MachineSettings], CncSession]
 
 
-def default_session(machine: MachineConfig) -> CncSession:
+def default_session(machine: MachineSettings) -> CncSession:
     timeouts = machine.timeouts
     extra: dict[str, Any] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
     if machine.path != 1:
@@ -167,11 +167,10 @@ def default_session(machine: MachineConfig) -> CncSession:
 class MachinePoller:
     """Owns one machine's session and polling task; `run()` until cancelled, `close()` after."""
 
-    def __init__(self, machine: MachineConfig, alarms: AlarmsConfig, sink: DeviceSink, state_dir: Path,
+    def __init__(self, machine: MachineSettings, sink: DeviceSink, state_dir: Path,
                  session_factory: SessionFactory = default_session, jitter_s: float = 1.0,
                  grid: TickGrid | None = None) -> None:
         self.machine = machine
-        self.alarms_config = alarms
         self.sink = sink
         self.session = session_factory(machine)
         self.stats = PollerStats()
@@ -298,7 +297,7 @@ class MachinePoller:
     async def _poll_session(self) -> None:
         static = await self._read_static()
         paths = await self._paths.count(self.session)
-        plan = pl.MachinePlan.build(self.machine, self.alarms_config, static)
+        plan = pl.MachinePlan.build(self.machine.poll, static)
         for operation in self._unsupported(plan):
             plan = plan.without(operation)
         self._full_plan = self._plan = plan

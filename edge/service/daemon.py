@@ -18,6 +18,7 @@ from pathlib import Path
 
 from edge import ConfigError, __version__
 from edge.collect.poller import MachinePoller, SessionFactory, default_session
+from edge.collect.settings import MachineSettings
 from edge.collect.tickgrid import TickGrid
 from edge.command.service import CommandService
 from edge.config import Config, MachineConfig, load_config
@@ -27,7 +28,7 @@ from edge.publish.spool import open_spool
 from edge.samples import MetricType, Sample
 from edge.service.gc_tuning import tune_collector
 from edge.service.sdnotify import SystemdNotifier
-from edge.service.settings import publish_settings
+from edge.service.settings import command_settings, machine_settings, publish_settings
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
@@ -48,7 +49,7 @@ class Daemon:
         self.publisher = Publisher(publish_settings(config), spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
-        self.commands = CommandService(config, self.publisher, self.pollers)
+        self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.on_device_command_refused = self.commands.on_device_command_refused
@@ -128,7 +129,7 @@ class Daemon:
 
     # ---- machines ------------------------------------------------------------------------------------
     def _start_machine(self, machine: MachineConfig) -> None:
-        poller = MachinePoller(machine, self.config.alarms_for(machine), self.publisher, self.state_dir,
+        poller = MachinePoller(machine_settings(self.config, machine), self.publisher, self.state_dir,
                                self.session_factory, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
@@ -179,7 +180,7 @@ class Daemon:
         removed = [i for i in old if i not in fresh]
         added = [i for i in fresh if i not in old]
         self.config = new
-        self.commands.reconfigure(new)
+        self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
         for machine_id in changed + added:
@@ -252,7 +253,7 @@ async def cancel_and_wait(tasks: list[asyncio.Task[None]]) -> None:
             task.cancel()
 
 
-def _stale_limit(machine: MachineConfig) -> float:
+def _stale_limit(machine: MachineSettings) -> float:
     timeouts = machine.timeouts
     periods = machine.poll.periods
     return 3 * (timeouts.request_s + timeouts.connect_s + timeouts.backoff_max_s) + max(

@@ -21,6 +21,7 @@ from edge.config import (
 )
 from edge.focas.client import MAX_SUBPACKETS
 from edge.focas.model import PmcType
+from edge.service.settings import machine_settings
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -289,7 +290,7 @@ def test_max_subpackets_reaches_the_client_and_is_checked() -> None:
           - {id: a, host: h}
           - {id: b, host: h, max_subpackets: 64}
     """)
-    clients = [default_session(m) for m in config.machines]
+    clients = [default_session(machine_settings(config, m)) for m in config.machines]
     assert [c.max_subpackets for c in clients] == [MAX_SUBPACKETS, 64]  # type: ignore[attr-defined]
     problems = problems_of("""
         mqtt: {host: b, formats: [json]}
