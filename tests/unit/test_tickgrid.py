@@ -86,7 +86,7 @@ async def test_a_step_changed_while_machines_sleep_keeps_their_slot_and_applies_
 
 
 def test_cycle_times_kept_as_a_constant_size_histogram() -> None:
-    from edge.collect.poller import CYCLE_BUCKETS, PollerStats
+    from edge.collect.stats import CYCLE_BUCKETS, PollerStats
     from edge.service.status_http import cycle_histogram
 
     stats = PollerStats()
