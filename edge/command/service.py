@@ -16,8 +16,7 @@ from dataclasses import dataclass, field, replace
 from itertools import groupby
 from typing import TYPE_CHECKING
 
-from edge.collect.plan import MachinePlan
-from edge.collect.settings import MachineSettings
+from edge.collect import MachinePlan, MachineSettings
 from edge.command.audit import AuditLog, AuditRecord, utc_now
 from edge.command.dcmd import merge_adjacent, metric_target
 from edge.command.errors import CommandRefused, ErrorCode
@@ -30,7 +29,7 @@ from edge.command.settings import CommandSettings, WritePolicy
 from edge.focas.model import SysInfo
 
 if TYPE_CHECKING:
-    from edge.collect.poller import MachinePoller
+    from edge.collect import MachinePoller
     from edge.publish.publisher import CommandSource, Publisher
 
 log = logging.getLogger(__name__)

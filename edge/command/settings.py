@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from edge.collect.settings import MachineSettings
+from edge.collect import MachineSettings
 from edge.focas.targets import TargetPattern
 
 

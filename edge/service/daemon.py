@@ -17,10 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from edge import ConfigError, __version__
-from edge.collect.poller import MachinePoller, SessionFactory, default_session
-from edge.collect.settings import MachineSettings
-from edge.collect.tickgrid import TickGrid
-from edge.command.service import CommandService
+from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
+from edge.command import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.config.service_access import state_dir_problem
 from edge.publish.publisher import Publisher

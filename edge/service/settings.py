@@ -5,7 +5,7 @@ never import edge.config. Values only: every decision (what to poll, whether a w
 
 from __future__ import annotations
 
-from edge.collect.settings import (
+from edge.collect import (
     MachineSettings,
     MacroValues,
     NumberedValue,
@@ -14,7 +14,7 @@ from edge.collect.settings import (
     PollSettings,
     Timeouts,
 )
-from edge.command.settings import AllowRule, CommandSettings, RateLimit, WritePolicy
+from edge.command import AllowRule, CommandSettings, RateLimit, WritePolicy
 from edge.config import AlarmsConfig, Config, MachineConfig, PollPlan
 from edge.publish.settings import PublishSettings
 
