@@ -294,6 +294,31 @@ async def test_a_hung_call_marks_only_that_cnc_unavailable(standin: Standin, hos
         assert await hung.read_macros(100) == [7.0]
 
 
+async def test_a_history_call_that_hangs_rests_while_the_other_reads_of_its_cnc_go_on(
+        standin: Standin, host: FwlibHost, cnc: PackedClient) -> None:
+    """Issue 24's stand-in: cnc_rdalmhistry3 hangs on every call. It is bounded by the call timeout (2 s
+    here), answers EW_SOCKET, and then rests (hung_rest_s, 60 s by default): answered at once without a
+    library call, so the CNC's other reads are not held up by it again and no second thread is abandoned."""
+    standin.set_history_version(3)
+    standin.push_alarm((2026, 3, 1, 8, 0, 0), 7, b"X")
+    await cnc.write_macro(100, 3.0)
+    standin.hang_history(-1)
+    started = time.monotonic()
+    with pytest.raises(CncError) as caught:
+        await cnc.read_alarm_history(10)
+    assert caught.value.code == EW_SOCKET
+    assert time.monotonic() - started < 5  # the 2 s call timeout, not the stand-in's 60 s hang
+    worker = host.workers["mill-1"]
+    await asyncio.wait_for(worker.wait_available(), 10)
+    assert await cnc.read_macros(100) == [3.0]
+    calls, connects = standin.calls("cnc_rdalmhistry"), worker.connects
+    started = time.monotonic()
+    results = await cnc.batch([it.ReadAlarmHistory(10), it.ReadMacros(100, 100), it.ReadAlarmHistory(10)])
+    assert time.monotonic() - started < 1.0  # no call timeout waited for
+    assert [getattr(r, "code", r) for r in results] == [EW_SOCKET, [3.0], EW_SOCKET]
+    assert (standin.calls("cnc_rdalmhistry"), worker.connects) == (calls, connects)  # the library was not asked
+
+
 async def test_a_lost_handle_is_reopened(standin: Standin, host: FwlibHost, cnc: PackedClient) -> None:
     await cnc.write_macro(100, 1.0)
     standin.drop_handles()
