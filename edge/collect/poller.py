@@ -271,12 +271,17 @@ class MachinePoller:
                 self.stats.overruns += 1
 
     async def _read_static(self) -> pl.StaticInfo:
-        results = await self.session.batch([it.ReadAxisNames(), it.ReadSpindleNames()])
+        items = [it.ReadAxisNames(), it.ReadSpindleNames()]
+        results = await self.session.batch(items)
         axes = results[0] if isinstance(results[0], list) else []
         spindles = results[1] if isinstance(results[1], list) else []
-        for result in results:
-            if isinstance(result, FocasError):
+        for item, result in zip(items, results, strict=True):
+            if isinstance(result, FunctionNotAvailable | NotSupported):  # a control without it: nothing to name
                 log.info("static read failed machine=%s error=%s", self.machine_id, result)
+            elif isinstance(result, FocasError):  # this session publishes no metric named by it: say so
+                self._count_failure(item.operation, result)
+            else:
+                self._answered(item.operation)
         per_axis = await per_axis_numbers(self.session, self.machine)
         return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
                              tuple(str(s) for s in spindles), per_axis)
@@ -352,6 +357,7 @@ class MachinePoller:
         history: list[AlarmHistoryEntry] | None = None
         last_raw = self._last_raw
         report = self._changes.report
+        failing = self.stats.failing
         # Only the reads whose result is not the very object they gave last time (found in C: most reads
         # of a tick do not move). Errors are new objects every time, alarm history is never kept.
         for index in compress(batch.indices, map(is_not, results, batch.previous(last_raw))):
@@ -363,7 +369,11 @@ class MachinePoller:
             kind = batch.kinds[index]
             if kind is ReadKind.ALARM_HISTORY:
                 history = list(result)
+                if failing:
+                    self._history_answered(read, timestamp, samples)
                 continue
+            if failing and last_raw[position] is _NOTHING:  # the first answer since a failure (or ever)
+                self._answered(pl.drop_key(read.item))
             if result == last_raw[position]:
                 last_raw[position] = result
                 continue  # an equal value decoded anew: nothing this read feeds has moved
@@ -424,10 +434,12 @@ class MachinePoller:
                 return False
         elif isinstance(result, datetime):
             self._clock_reading, self._clock_epoch = result, cnc_to_utc_seconds(result, self.clock.zone)
+            if self.stats.failing:
+                self._answered("ReadClock")
         else:
             self._clock_reading = _NOTHING
             if isinstance(result, FocasError):
-                self.stats.count_error(result)
+                self._count_failure("ReadClock", result)
             return True
         steps = self.clock.steps
         self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
@@ -460,10 +472,39 @@ class MachinePoller:
             if sample is not None:
                 samples.append(sample)
 
+    def _count_failure(self, function: str, error: FocasError) -> None:
+        """A failed read of `function`: counted, the last error, and failing until it answers again.
+
+        A function the control does not have is not "failing": it is dropped and listed as such.
+        """
+        self.stats.count_error(function, error)
+        self.last_error = f"{function}: {error}"
+        if isinstance(error, FunctionNotAvailable | NotSupported):
+            self.stats.answered(function)
+        elif self.stats.failed(function, error, time.time()):
+            log.warning("read failing machine=%s function=%s error=%s", self.machine_id, function, error)
+
+    def _answered(self, function: str) -> None:
+        """`function` read fine: if it was failing, say since when and how often."""
+        trouble = self.stats.answered(function)
+        if trouble is not None:
+            log.info("read answers again machine=%s function=%s errors=%d failing_for=%.1fs", self.machine_id,
+                     function, trouble.errors, time.time() - trouble.since)
+
+    def _history_answered(self, read: pl.PlannedRead, timestamp: int, samples: list[Sample]) -> None:
+        """The history read answered: its metric (no value of its own, BAD while it failed) is GOOD again."""
+        function = pl.drop_key(read.item)
+        if function not in self.stats.failing:
+            return
+        self._answered(function)
+        for spec in read.metrics:
+            sample = self._changes.report(spec.name, None, spec.type, timestamp, Quality.GOOD)
+            if sample is not None:
+                samples.append(sample)
+
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
-        self.stats.count_error(error)
-        self.last_error = f"{read.item.operation}: {error}"
+        self._count_failure(pl.drop_key(read.item), error)
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = pl.drop_key(read.item)
             if operation not in self._dropped:
@@ -499,6 +540,8 @@ class MachinePoller:
         if isinstance(result, FocasError):
             self._item_failed(reads[0], result, timestamp, samples)
             return []
+        if self.stats.failing:
+            self._answered(pl.drop_key(reads[0].item))
         alarms: list[ActiveAlarm] = list(result)
         samples.extend(self._changes.filter(Sample(spec.name, value, spec.type, timestamp)
                                             for spec, value in pl.metric_values(reads[0], alarms)))
