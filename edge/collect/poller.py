@@ -1,11 +1,16 @@
 """One machine's polling loop: connect, read static data, then tick until the session breaks.
 
 A tick batches every due group plus the CNC clock into ONE request (one network round trip), turns
-the results into samples stamped with CNC time, and hands what changed to the sink. A failed item
-only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is dropped
-from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and at
-every reconnect, since one transient answer must not end a data stream. A broken session ends in
+the results into samples stamped with CNC time, and hands what changed to the sink. Between ticks, a
+few clock-only reads timed by edge.collect.clock_probe keep the CNC-vs-gateway offset to milliseconds.
+A failed item only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is
+dropped from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and
+at every reconnect, since one transient answer must not end a data stream. A broken session ends in
 device_offline, backoff, and a fresh birth with the full state on recovery.
+
+Still one module past ~600 lines: everything here shares one session, one tick's results and one change
+detector, in the order a tick needs them; the decisions live elsewhere (plan, clock, clock_probe, alarms,
+changes). The clock's feed (observe, log, publish, clock-only reads, ~90 lines) is the part to move out next.
 """
 
 from __future__ import annotations
@@ -35,7 +40,8 @@ from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
-from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
+from edge.collect.clock import MAX_DRIFT_RATE, ClockTracker, cnc_to_utc_seconds
+from edge.collect.clock_probe import ClockProbes
 from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
 from edge.collect.tickgrid import TickGrid
 from edge.config import AlarmsConfig, MachineConfig
@@ -75,6 +81,7 @@ class PollerStats:
 
     ticks: int = 0
     status_reads: int = 0  # ticks that read the status group (the status page's achieved poll rate)
+    clock_probes: int = 0  # clock-only reads between ticks (edge.collect.clock_probe)
     overruns: int = 0
     skipped: int = 0
     connects: int = 0
@@ -113,6 +120,7 @@ class ReadKind(enum.Enum):
 
 _NOT_IN_TICK = frozenset({pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})  # read on change / once per session
 _NOTHING = object()  # no previous result (compares unequal to any result)
+PROBE_ITEMS = (it.ReadClock(),)  # a clock-only read (one stable tuple: the client reuses its request)
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,7 +187,9 @@ class MachinePoller:
         self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
         self.last_error = ""  # the last connect, session or read error, for the status page
         self.last_progress = time.monotonic()
-        self.clock = ClockTracker(machine.zone, machine.max_skew_s)
+        self.clock = ClockTracker(machine.zone, machine.max_skew_s, drift_rate=MAX_DRIFT_RATE)
+        self._probes = ClockProbes(self.clock)
+        self._clock_news = False  # a clock-only read (or a slew) moved the clock: the next tick publishes it
         self._jitter_s = jitter_s
         self._changes = ChangeDetector()
         self._alarms = ActiveAlarmProjection()
@@ -327,6 +337,8 @@ class MachinePoller:
         fastest = min(plan.periods.values())
         while True:
             next_due = schedule.next_due() or time.monotonic() + fastest
+            if await self._probe_clock_before(next_due):
+                continue
             await self._grid.sleep_until(next_due)
             started = time.monotonic()
             groups = schedule.due(started)
@@ -450,8 +462,8 @@ class MachinePoller:
                 sample = report(spec.name, value, spec.type, timestamp)
                 if sample is not None:
                     samples.append(sample)
-        if clock_observed:
-            self._clock_samples(timestamp, samples)
+        if clock_observed or self._clock_news:
+            self._clock_samples(timestamp, mid_mono, samples)
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
@@ -486,6 +498,28 @@ class MachinePoller:
         log.info("dropped function answers again machine=%s operations=%s", self.machine_id,
                  ",".join(sorted(answered)))
         samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
+
+    async def _probe_clock_before(self, next_due: float) -> bool:
+        """Read the clock alone when the tracker wants a reading before the next tick (clock_probe): True
+        when it did. Its time is exact (its own timer, not the shared tick grid); its values wait for the
+        next tick, whose stamps it improved."""
+        half_rtt = self.stats.last_cycle_s / 2
+        send_at = self._probes.send_at(time.monotonic(), half_rtt)
+        if send_at >= self._grid.slot_time(next_due):
+            return False
+        delay = send_at - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        wall_before, mono_before = time.time(), time.monotonic()
+        (result,) = await self.session.batch(PROBE_ITEMS)
+        mono_after, wall_after = time.monotonic(), time.time()
+        self.last_progress = mono_after
+        self.stats.clock_probes += 1
+        self._observe_clock(result, (mono_before + mono_after) / 2, (wall_before + wall_after) / 2,
+                            (mono_after - mono_before) / 2)
+        self._probes.done(mono_after)
+        self._clock_news = True
+        return True
 
     def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
         """Feed the tick's clock reading to the tracker; False when it changed nothing about the clock.
@@ -524,16 +558,24 @@ class MachinePoller:
         log.warning("CNC clock stepped machine=%s step=%+.1fs skew=%.1fs: offset re-synced, %s", self.machine_id,
                     step, self.clock.skew_s or 0.0, follow)
 
-    def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
-        skew = self.clock.skew_s
+    def _clock_samples(self, timestamp: int, mid_mono: float, samples: list[Sample]) -> None:
+        clock = self.clock
+        skew = clock.skew_s
+        uncertainty = clock.uncertainty_at(mid_mono)
         report = self._changes.report
         for sample in (
             report(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
                    timestamp, Quality.GOOD if skew is not None else Quality.BAD),
-            report(pl.CLOCK_GATEWAY.name, self.clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
+            report(pl.CLOCK_GATEWAY.name, clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
+            # Whole milliseconds, rounded up: still a bound, and it moves every ~10 s as readings age, not every tick
+            report(pl.CLOCK_UNCERTAINTY.name, float(math.ceil(uncertainty * 1000)) if uncertainty is not None else None,
+                   pl.CLOCK_UNCERTAINTY.type, timestamp, Quality.GOOD if uncertainty is not None else Quality.BAD),
+            report(pl.CLOCK_SYNCHRONISED.name, clock.synchronised_at(mid_mono), pl.CLOCK_SYNCHRONISED.type,
+                   timestamp),
         ):
             if sample is not None:
                 samples.append(sample)
+        self._clock_news = clock.slew_lag_at(mid_mono) > 0.0  # while stamps slew, Synchronised may turn true
 
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
