@@ -11,6 +11,7 @@ from edge.focas.model import PmcType
 
 MACRO_FIRST, MACRO_LAST = 500, 509
 STAMP_MACRO = 509  # the fleet simulator sets this one to its own wall-clock time (seconds mod 1000)
+CLOCK_MACRO = 508  # and answers this one with its CNC clock at the moment it answers (timestamp error)
 PMC_RANGES = (("R", 100, 103, PmcType.BYTE), ("D", 2204, 2207, PmcType.WORD), ("G", 0, 7, PmcType.BYTE),
               ("F", 0, 3, PmcType.BYTE))
 
