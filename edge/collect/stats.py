@@ -32,6 +32,7 @@ class PollerStats:
 
     ticks: int = 0
     status_reads: int = 0  # ticks that read the status group (the status page's achieved poll rate)
+    clock_probes: int = 0  # clock-only reads between ticks (edge.collect.clock_probe)
     overruns: int = 0
     skipped: int = 0
     connects: int = 0
