@@ -21,7 +21,7 @@ import sys
 import time
 
 from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim.state_program import CycleSpec
 
 STAMP_MODULO = 1000.0
 WRITE_LOG_LIMIT = 1000

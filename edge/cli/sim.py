@@ -59,7 +59,7 @@ def build_scenario(args: argparse.Namespace) -> Any:
     from edge.sim.fleet import MachineSpec
     from edge.sim.profiles import get_profile
     from edge.sim.scenario import Scenario, load_scenario
-    from edge.sim.state import CycleSpec
+    from edge.sim.state_program import CycleSpec
 
     if args.scenario:
         if args.machines is not None:

@@ -33,7 +33,9 @@ from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.native_server import answer_subpacket
 from edge.sim.profiles import PROFILES, get_profile
 from edge.sim.scenario import load_scenario, parse_scenario
-from edge.sim.state import ALARM_HISTORY_SIZE, CycleSpec, MachineState
+from edge.sim.state import MachineState
+from edge.sim.state_alarms import ALARM_HISTORY_SIZE
+from edge.sim.state_program import CycleSpec
 
 T0 = 1_750_000_000.0  # 2025-06-15 15:06:40 UTC
 

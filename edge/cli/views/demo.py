@@ -25,7 +25,7 @@ from edge.config import Config, MachineConfig, load_config
 from edge.service.daemon import Daemon
 from edge.service.logformat import configure_logging
 from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim.state_program import CycleSpec
 
 log = logging.getLogger("edge.cli.views.demo")
 
