@@ -31,9 +31,11 @@ from edge.focas.frame import (
 from edge.focas.functions import Context
 from edge.focas.model import PmcType
 from edge.focas.values import SlotForm, encode_scaled
-from edge.sim import native_server as ns
+from edge.sim import native_plans as ns  # the fast path's caches live in native_plans
 from edge.sim.faults import FaultPlan
-from edge.sim.native_server import HANDLERS, NativeServer, answer_subpacket, scaled_bytes
+from edge.sim.native_handlers import HANDLERS, answer_subpacket
+from edge.sim.native_plans import scaled_bytes
+from edge.sim.native_server import NativeServer
 from edge.sim.profiles import PROFILES, get_profile
 from edge.sim.state import MachineState
 from edge.sim.state_program import CycleSpec

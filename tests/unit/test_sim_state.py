@@ -30,7 +30,7 @@ from edge.focas.model import ParamType, PmcType
 from edge.sim.admin import AdminServer, HttpError
 from edge.sim.faults import FaultPlan
 from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.native_server import answer_subpacket
+from edge.sim.native_handlers import answer_subpacket
 from edge.sim.profiles import PROFILES, get_profile
 from edge.sim.scenario import load_scenario, parse_scenario
 from edge.sim.state import MachineState
