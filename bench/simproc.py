@@ -20,8 +20,7 @@ import random
 import sys
 import time
 
-from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state_program import CycleSpec
+from edge.sim import CycleSpec, Fleet, MachineSpec
 
 STAMP_MODULO = 1000.0
 WRITE_LOG_LIMIT = 1000
