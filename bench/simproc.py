@@ -9,7 +9,7 @@ end of input closes the fleet. With --stamp-macro each machine sets that macro t
 time (seconds modulo 1000, millisecond resolution) at random moments, so a subscriber can tell how
 long a change took to reach the broker: latency = receipt time - value (mod 1000). With --clock-macro that
 macro reads as the CNC's clock at the moment it answers, so a published timestamp minus its value is the
-timestamp's error (edge.sim.state.clock_macro_error).
+timestamp's error (edge.sim.state_clock.clock_macro_error).
 """
 
 from __future__ import annotations
@@ -23,8 +23,7 @@ import random
 import sys
 import time
 
-from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim import CycleSpec, Fleet, MachineSpec
 
 STAMP_MODULO = 1000.0
 WRITE_LOG_LIMIT = 1000

@@ -20,7 +20,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from bench.simproc import stamp_latency
 from edge.publish.sparkplug_b_pb2 import Payload
-from edge.sim.state import clock_macro_error
+from edge.sim.state_clock import clock_macro_error
 
 OVERRUNS_METRIC = "Gateway/PollOverruns"
 

@@ -24,7 +24,8 @@ from typing import Any
 from edge.sim.faults import FaultPlan
 from edge.sim.native_server import NativeServer
 from edge.sim.profiles import get_profile
-from edge.sim.state import CycleSpec, MachineState
+from edge.sim.state import MachineState
+from edge.sim.state_program import CycleSpec
 
 log = logging.getLogger(__name__)
 

@@ -16,7 +16,7 @@ from edge.collect.clock_probe import BURST
 from edge.config import parse_config
 from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import clock_macro_error
+from edge.sim.state_clock import clock_macro_error
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.daemon_config import daemon_config
 from tests.integration.mqtt_observer import Observer, metrics_by_name

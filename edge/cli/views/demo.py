@@ -24,8 +24,7 @@ from edge.cli.views.watch import Watcher
 from edge.config import Config, MachineConfig, load_config
 from edge.service.daemon import Daemon
 from edge.service.logformat import configure_logging
-from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim import CycleSpec, Fleet, MachineSpec
 
 log = logging.getLogger("edge.cli.views.demo")
 
