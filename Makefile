@@ -11,13 +11,13 @@ RUN_STAMP := $(VENV)/.run-stamp
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,dev,demo,bench]'
+	$(PY) -m pip install --quiet -e '.[test,dev,demo,bench,opcua]'
 	@touch $(STAMP) $(RUN_STAMP)
 
 # What running needs and nothing else (no test, lint or bench tools): the package and the embedded broker.
 $(RUN_STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -e '.[demo]'
+	$(PY) -m pip install --quiet -e '.[demo,opcua]'
 	@touch $(RUN_STAMP)
 
 venv: $(STAMP)
