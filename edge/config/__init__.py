@@ -39,6 +39,7 @@ from pydantic import (
 from edge import ConfigError
 from edge.config.lines import with_lines
 from edge.config.merge import expand_machines
+from edge.config.opcua import OpcUaConfig, opcua_secret_problems
 from edge.focas.items import POSITION_KINDS
 from edge.focas.model import PmcType
 from edge.focas.paths import MAX_PATHS
@@ -760,6 +761,7 @@ class Config(_Model):
     state_dir: Path | None = None
     http: HttpConfig = Field(default_factory=HttpConfig)
     spool: SpoolConfig = Field(default_factory=SpoolConfig)
+    opcua: OpcUaConfig = Field(default_factory=OpcUaConfig)
     # Poll wake-ups are rounded up to this grid, so the machines due in one slot share one event-loop turn
     # (docs/performance.md): a poll is at most this much later than due, never earlier, never skipped.
     # None is `auto` (the default): see poll_grid_step_s.
@@ -863,14 +865,16 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     except ValidationError as exc:
         found = expansion_problems + format_errors(exc)
         found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data), *_machine_cross_checks(data),
-                                   *_secret_problems(data, environ))
+                                   *_secret_problems(data, environ),
+                                   *opcua_secret_problems(data.get("opcua"), environ))
                   if p not in found]
         raise ConfigError(with_lines(found, text), source) from None
-    problems = list(_secret_problems(data, environ))
+    problems = [*_secret_problems(data, environ), *opcua_secret_problems(data.get("opcua"), environ)]
     if problems:
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
     config._warnings.extend(_native_only_warnings(config))
+    config._warnings.extend(config.opcua.warnings())
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)
