@@ -304,6 +304,16 @@ class CommandService:
             old=result.old, new=result.read_back, outcome=result.outcome,
             message=result.note if result.ok else result.message))
 
+    def may_write(self, device_id: str, metric: str) -> bool:
+        """Whether the machine's write policy covers the target behind `metric` (whatever the value): what an
+        OPC UA node's AccessLevel shows. The write itself is still checked in full by `execute`."""
+        machine = self._machine(device_id)
+        if machine is None:
+            return False
+        policy = self.config.write_policy(machine)
+        target = metric_target(self._plan(machine), metric)
+        return policy.enabled and target is not None and any(rule.pattern.covers(target) for rule in policy.allow)
+
     def _machine(self, machine_id: str) -> MachineConfig | None:
         try:
             return self.config.machine(machine_id)

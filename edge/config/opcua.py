@@ -106,8 +106,10 @@ class OpcUaConfig(_Section):
             return []
         found = []
         if "None" in self.security:
-            found.append("opcua.security lists None: that endpoint sends values, writes and user passwords "
-                         "unencrypted; keep it to a trusted network, or remove it")
+            passwords = ("user passwords in clear text too" if self.security == ["None"] else
+                         "user passwords stay encrypted with the server certificate")
+            found.append("opcua.security lists None: on that endpoint values and writes travel unsigned and "
+                         f"unencrypted ({passwords}); keep it to a trusted network, or remove it")
         if self.allow_anonymous:
             found.append("opcua.allow_anonymous is true: anyone who reaches port "
                          f"{self.port} can read every value and try writes (the write policy still decides)")

@@ -95,7 +95,12 @@ class OpcUaOutput:
         try:
             loop.run_until_complete(self._thread_serve(started))
         finally:
+            # what asyncua leaves behind (sessions of clients that vanished, their subscription loops)
+            left = asyncio.all_tasks(loop)
+            for task in left:
+                task.cancel()
             with contextlib.suppress(Exception):
+                loop.run_until_complete(asyncio.gather(*left, return_exceptions=True))
                 loop.run_until_complete(loop.shutdown_asyncgens())
             loop.close()
 

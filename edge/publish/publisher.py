@@ -54,7 +54,7 @@ FORMATS: tuple[Format, ...] = ("sparkplug", "json")
 class CommandSource:
     """Where a command came from, so the reply (if any) can go back the same way."""
 
-    format: Format
+    format: Format | Literal["opcua"]  # an OPC UA write has no reply topic: its Write response answers it
     topic: str
     response_topic: str | None = None  # MQTT 5 request/response
     correlation_data: bytes | None = None
