@@ -1,4 +1,8 @@
-"""focas-edge: FANUC FOCAS/Ethernet edge collector publishing Sparkplug B 3.0 and JSON over MQTT."""
+"""focas-edge: FANUC FOCAS/Ethernet edge collector publishing Sparkplug B 3.0 and JSON over MQTT.
+
+ConfigError lives here, not in edge.config, because focas, fwlib and sim raise it too (bad addresses,
+bad scenario files) and must not import the config.
+"""
 
 __version__ = "0.1.0"
 

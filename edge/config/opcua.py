@@ -20,20 +20,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from edge import ConfigError
+from edge.config.fields import _Model, check_file
 
 # The endpoint security modes (edge.opcua.settings.SECURITY_MODES maps them to asyncua's policies).
 SecurityMode = Literal["Basic256Sha256-SignAndEncrypt", "Basic256Sha256-Sign", "None"]
 DEFAULT_SECURITY: tuple[SecurityMode, ...] = ("Basic256Sha256-SignAndEncrypt",)
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class OpcUaUser(_Section):
+class OpcUaUser(_Model):
     username: str = Field(min_length=1, max_length=128)
     password: object = Field(default=None, exclude=True, repr=False)
     password_env: str | None = None
@@ -54,7 +51,7 @@ class OpcUaUser(_Section):
         return self
 
 
-class OpcUaConfig(_Section):
+class OpcUaConfig(_Model):
     enabled: bool = False
     host: str = "0.0.0.0"
     port: int = Field(default=4840, ge=1, le=65535)
@@ -85,9 +82,7 @@ class OpcUaConfig(_Section):
     @field_validator("certificate_file", "private_key_file")
     @classmethod
     def _readable(cls, value: Path | None) -> Path | None:
-        if value is not None and not value.is_file():
-            raise ValueError(f"no such file: {value}")
-        return value
+        return check_file(value)
 
     @model_validator(mode="after")
     def _usable(self) -> OpcUaConfig:

@@ -15,7 +15,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from edge.config import Config
+from edge.config.root import Config
 
 SERVICE_USER = "focas-edge"
 # The unit's StateDirectory=: systemd creates it owned by the service user, and under ProtectSystem=strict

@@ -1,0 +1,1 @@
+"""Unit tests of edge.config, one file per module (test_<module>.py)."""

@@ -1,0 +1,112 @@
+"""check-config --as-service finds what the service user could not read or write, and an unusable
+state_dir stops `run` with exit 2 and one line."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from edge.cli import main
+from edge.config import parse_config, service_access
+from edge.config.service_access import Account, lookup_account, service_problems, state_dir_problem
+from tests.unit.config.minimal import MINIMAL
+
+
+@pytest.fixture
+def open_dir() -> Iterator[Path]:
+    """A directory any user can enter (pytest's tmp_path is 0700, which would hide everything in it)."""
+    path = Path(tempfile.mkdtemp(prefix="focas-edge-svc-"))
+    path.chmod(0o755)
+    yield path
+    shutil.rmtree(path)
+
+
+@pytest.fixture
+def other_user() -> str:
+    try:
+        account = lookup_account("nobody")
+    except KeyError:
+        pytest.skip("no user 'nobody' here")
+    if account.uid == os.getuid():
+        pytest.skip("running as nobody")
+    return "nobody"
+
+
+def tls_config(folder: Path, mode: int) -> Path:
+    ca = folder / "ca.pem"
+    ca.write_text("not checked here\n")
+    ca.chmod(mode)
+    config = folder / "edge.yaml"
+    config.write_text(MINIMAL.replace("  host: broker", f"  host: broker\n  tls: {{ca_file: {ca}}}"))
+    return config
+
+
+def test_as_service_names_a_file_the_service_user_cannot_read(
+        open_dir: Path, other_user: str, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tls_config(open_dir, 0o600)
+    assert main(["check-config", str(config)]) == 0  # fine for whoever runs check-config
+    capsys.readouterr()
+    assert main(["check-config", "--as-service", "--service-user", other_user, str(config)]) == 2
+    err = capsys.readouterr().err
+    assert f"mqtt.tls.ca_file: user {other_user} cannot read {open_dir / 'ca.pem'}" in err
+    (open_dir / "ca.pem").chmod(0o644)
+    assert main(["check-config", "--as-service", "--service-user", other_user, str(config)]) == 0
+
+
+def test_as_service_names_a_directory_the_service_user_cannot_enter(open_dir: Path, other_user: str) -> None:
+    config = parse_config(tls_config(open_dir, 0o644).read_text())
+    open_dir.chmod(0o700)
+    assert service_problems(config, other_user) == [
+        f"mqtt.tls.ca_file: user {other_user} cannot enter {open_dir} to read {open_dir / 'ca.pem'}"]
+
+
+def test_as_service_refuses_a_state_dir_outside_the_units_state_directory(open_dir: Path, other_user: str) -> None:
+    config = parse_config(MINIMAL + f"state_dir: {open_dir}\n")
+    (problem,) = service_problems(config, other_user)
+    assert problem.startswith(f"state_dir: {open_dir} is read-only for the service") and "ProtectSystem" in problem
+
+
+def test_as_service_finds_an_unwritable_state_dir(
+        open_dir: Path, other_user: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(service_access, "UNIT_STATE_DIR", open_dir)  # owned by us, 0755: not writable by others
+    config = parse_config(MINIMAL + f"state_dir: {open_dir / 'sub'}\n")
+    assert service_problems(config, other_user) == [f"state_dir: user {other_user} cannot write {open_dir}"]
+    open_dir.chmod(0o777)
+    assert service_problems(config, other_user) == []
+
+
+def test_as_service_with_an_unknown_user(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    config = tmp_path / "edge.yaml"
+    config.write_text(MINIMAL)
+    assert main(["check-config", "--as-service", "--service-user", "no-such-user-x", str(config)]) == 2
+    assert "service user 'no-such-user-x' does not exist" in capsys.readouterr().err
+
+
+def test_the_service_user_is_checked_by_mode_bits() -> None:
+    account = Account("svc", uid=12345, gids=frozenset({12345}))
+    assert service_access.allowed(account, Path("/"), service_access.SEARCH)
+    assert not service_access.allowed(account, Path("/"), service_access.WRITE)
+
+
+def test_unusable_state_dir_fails_check_config_and_run_with_exit_2_and_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "edge.yaml"
+    config.write_text(MINIMAL + "state_dir: /proc/nope\n")
+    assert main(["check-config", str(config)]) == 2
+    assert "state_dir: cannot create or write /proc/nope" in capsys.readouterr().err
+    assert main(["run", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [f"focas-edge: {config}: state_dir: cannot create or write /proc/nope "
+                                "(No such file or directory)"]
+
+
+def test_state_dir_probe_leaves_nothing_behind(tmp_path: Path) -> None:
+    assert state_dir_problem(tmp_path / "a" / "b") is None
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "file").write_text("")
+    assert state_dir_problem(tmp_path / "file") == f"state_dir: {tmp_path / 'file'} is not a directory"
