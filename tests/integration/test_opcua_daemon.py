@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import time
 from collections.abc import AsyncIterator, Callable
 from datetime import UTC, datetime
@@ -217,29 +218,24 @@ async def test_node_opcua_client_browses_reads_subscribes_and_writes(gateway: Ga
 
 
 async def test_a_heavy_or_rude_client_does_not_disturb_polling_or_mqtt(gateway: Gateway) -> None:
-    client = await secure_client(gateway)
-    ns = await client.get_namespace_index(NS_URI)
-    nodes = [client.get_node(ua.NodeId(f"m1/Metrics/Macro/{500 + i % 11}", ns)) for i in range(10_000)]
-
-    class Quiet:
-        def datachange_notification(self, *_: Any) -> None:
-            pass
-
-    subscription = await client.create_subscription(100, Quiet())
+    """10,000 monitored items, three wrong-type writes and a connection dropped mid-session, from a client in
+    its own process: the data keeps flowing to MQTT, the daemon stays healthy, nothing reaches the CNC."""
+    pki = ensure_certificate(gateway.state_dir / "client-pki", "urn:focas-edge:test-client", "localhost")
     before = gateway.ddata()
-    handles = await subscription.subscribe_data_change(nodes, queuesize=1)
-    assert len(handles) == 10_000 and all(isinstance(h, int) for h in handles)
-    macro = client.get_node(ua.NodeId("m1/Metrics/Macro/501", ns))
-    for wrong in (ua.Variant("text", ua.VariantType.String), ua.Variant(1, ua.VariantType.Int32),
-                  ua.Variant([1.0, 2.0], ua.VariantType.Double)):
-        with pytest.raises(ua.uaerrors.BadTypeMismatch):
-            await macro.write_value(ua.DataValue(wrong))
-    client.uaclient.protocol.transport.abort()  # gone without closing its session or its 10,000 items
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "tests.integration.opcua_rude_client", gateway.url, USER, PASSWORD,
+        str(pki.certificate), str(pki.private_key), stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
+    stdout, stderr = await asyncio.wait_for(process.communicate(), 120)
+    assert process.returncode == 0, stderr.decode()[-2000:]
+    result = json.loads(stdout.decode().strip().splitlines()[-1])
+    assert result == {"items": 10_000, "writes": ["BadTypeMismatch"] * 3}
     await async_wait_for(lambda: gateway.ddata() >= before + 20, timeout=15, message="DDATA flowing meanwhile")
     assert gateway.daemon.healthy()
+    assert [a["outcome"] for a in gateway.audit()] == ["wrong_type"] * 3
     again = await secure_client(gateway)
     try:
+        ns = await again.get_namespace_index(NS_URI)
         assert await again.get_node(ua.NodeId("m1/Identification/Manufacturer", ns)).read_value() == "FANUC"
     finally:
         await again.disconnect()
-    assert gateway.sim.state.writes("macro:501") == []  # nothing wrong reached the CNC
+    assert gateway.sim.state.writes("macro:") == []  # nothing wrong reached the CNC
