@@ -137,6 +137,7 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float) -> di
             measured["client_changes_seen"] = len(seen["change_ms"])
             measured["client_sample_p50_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 50) * 1000
             measured["client_sample_p99_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 99) * 1000
+            measured.update(burst(client, subscriber))
         measured["mode"] = mode
         return measured
     finally:
@@ -152,9 +153,27 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float) -> di
         shutil.rmtree(workdir, ignore_errors=True)
 
 
+def burst(client: ClientProcess, subscriber: LatencySubscriber) -> dict[str, Any]:
+    """The client creates 10,000 monitored items in one request while the MQTT subscriber times the data:
+    what the poll loop and MQTT feel while the server works through the largest single step."""
+    subscriber.take()
+    overruns = subscriber.overruns or 0
+    subscriber.recording = True
+    took = client.answer("burst")["burst_s"]
+    time.sleep(BURST_SETTLE_S)  # the latencies right after, and one node-metrics period for the overruns
+    subscriber.recording = False
+    change, _ = subscriber.take()
+    return {"burst_s": took, "burst_mqtt_change_p99_ms": percentile(change, 99) * 1000,
+            "burst_mqtt_change_max_ms": max(change, default=float("nan")) * 1000,
+            "burst_overruns": (subscriber.overruns or 0) - overruns}
+
+
+BURST_SETTLE_S = 6.0
+
 KEYS = ("cpu_us_per_cycle", "gateway_cores", "rss_mb", "achieved_pct", "overruns", "change_p99_ms",
         "client_items", "subscribe_s", "client_notifications_per_s", "client_change_p50_ms", "client_change_p99_ms",
-        "client_sample_p50_ms", "client_sample_p99_ms", "steal_pct")
+        "client_sample_p50_ms", "client_sample_p99_ms", "burst_s", "burst_mqtt_change_p99_ms",
+        "burst_mqtt_change_max_ms", "burst_overruns", "steal_pct")
 
 
 def run(quick: bool = False, machines: int | None = None, duration_s: float | None = None,

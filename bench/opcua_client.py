@@ -5,6 +5,8 @@ what arrives. Commands on stdin, one JSON line per answer on stdout:
     -> {"items": N}          once subscribed to every variable below each machine's Metrics folder
     start                    forget what arrived so far, record from now on
     report                   -> {"notifications": n, "seconds": s, "change_ms": [...], "sample_ms": [...]}
+    burst                    one CreateMonitoredItems request of 10,000 items (a second subscription)
+                             -> {"burst_s": seconds until the server answered}
     stop                     disconnect and exit
 
 change = the simulator's stamp macro value (its wall clock at the change) to receipt here; sample = the
@@ -27,6 +29,7 @@ from bench.simproc import stamp_latency
 NS_URI = "urn:focas-edge:machines"
 BROWSE_BATCH = 500
 SUBSCRIBE_BATCH = 1000
+BURST_ITEMS = 10_000
 
 
 class Recorder:
@@ -87,6 +90,15 @@ async def variables(client: Client) -> list[ua.NodeId]:
     return found
 
 
+async def burst(client: Client, nodes: list[ua.NodeId]) -> float:
+    """10,000 monitored items in one request: the largest single step a client can ask of the server."""
+    items = [client.get_node(nodes[i % len(nodes)]) for i in range(BURST_ITEMS)]
+    subscription = await client.create_subscription(1000, Recorder(set()))
+    started = time.monotonic()
+    await subscription.subscribe_data_change(items, queuesize=1)
+    return time.monotonic() - started
+
+
 async def main(url: str, user: str, password: str, cert: str, key: str, stamp_metric: str) -> None:
     client = Client(url, timeout=60)
     client.application_uri = "urn:focas-edge:bench-client"
@@ -116,6 +128,8 @@ async def main(url: str, user: str, password: str, cert: str, key: str, stamp_me
             print(json.dumps({"started": True}), flush=True)
         elif line == "report":
             print(json.dumps(recorder.report()), flush=True)
+        elif line == "burst":
+            print(json.dumps({"burst_s": await burst(client, nodes)}), flush=True)
         else:
             break
     await client.disconnect()
