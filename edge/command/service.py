@@ -304,15 +304,22 @@ class CommandService:
             old=result.old, new=result.read_back, outcome=result.outcome,
             message=result.note if result.ok else result.message))
 
-    def may_write(self, device_id: str, metric: str) -> bool:
-        """Whether the machine's write policy covers the target behind `metric` (whatever the value): what an
-        OPC UA node's AccessLevel shows. The write itself is still checked in full by `execute`."""
+    def writable_metrics(self, device_id: str, metrics: Sequence[str]) -> frozenset[str]:
+        """Which of `metrics` have a CNC target the machine's write policy covers (whatever the value): what
+        an OPC UA node's AccessLevel shows. A write itself is still checked in full by `execute`."""
         machine = self._machine(device_id)
         if machine is None:
-            return False
+            return frozenset()
         policy = self.config.write_policy(machine)
-        target = metric_target(self._plan(machine), metric)
-        return policy.enabled and target is not None and any(rule.pattern.covers(target) for rule in policy.allow)
+        if not policy.enabled:
+            return frozenset()
+        plan = self._plan(machine)
+        covered = set()
+        for name in metrics:
+            target = metric_target(plan, name)
+            if target is not None and any(rule.pattern.covers(target) for rule in policy.allow):
+                covered.add(name)
+        return frozenset(covered)
 
     def _machine(self, machine_id: str) -> MachineConfig | None:
         try:

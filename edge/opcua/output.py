@@ -33,8 +33,8 @@ MAILBOX_LIMIT = 20_000  # data batches waiting for the server; beyond it a batch
 START_TIMEOUT_S = 60.0
 STOP_TIMEOUT_S = 10.0
 
-# (device id, metric name) -> whether the write policy covers it: the node's AccessLevel
-Writable = Callable[[str, str], bool]
+# (device id, writable metric names) -> those the write policy covers: the nodes' AccessLevel
+Writable = Callable[[str, Sequence[str]], frozenset[str]]
 
 
 class OpcUaOutput:
@@ -140,9 +140,8 @@ class OpcUaOutput:
 
     # ---- the collector's side (daemon loop): never waits on the server ------------------------------
     async def device_online(self, device_id: str, specs: Sequence[MetricSpec], samples: Sequence[Sample]) -> None:
-        check = self.writable
-        writable = frozenset(spec.name for spec in specs
-                             if spec.writable and (check is None or check(device_id, spec.name)))
+        names = [spec.name for spec in specs if spec.writable]
+        writable = frozenset(names) if self.writable is None else self.writable(device_id, names)
         self._post(("online", device_id, tuple(specs), tuple(samples), writable))
 
     async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:

@@ -47,7 +47,7 @@ def opcua_output(config: Config, commands: CommandService) -> OpcUaOutput | None
         certificate_file=section.certificate_file, private_key_file=section.private_key_file,
         application_uri=f"urn:focas-edge:{node}", threaded=section.threaded,
         write_timeout_s=section.write_timeout_s, max_sessions=section.max_sessions)
-    return OpcUaOutput(settings, CommandWriter(commands), commands.may_write)
+    return OpcUaOutput(settings, CommandWriter(commands), commands.writable_metrics)
 
 
 class CommandWriter:

@@ -157,9 +157,12 @@ async def test_asyncua_client_browses_reads_subscribes_and_writes(gateway: Gatew
         assert abs(value.ServerTimestamp.timestamp() - time.time()) < CNC_AHEAD_S / 2  # the gateway's clock
 
         allowed = client.get_node(ua.NodeId("m1/Metrics/Macro/505", ns))
+        refused = client.get_node(ua.NodeId("m1/Metrics/Macro/510", ns))
+        writable = ua.AccessLevel.CurrentWrite.mask
+        assert (await allowed.read_attribute(ua.AttributeIds.AccessLevel)).Value.Value & writable  # the policy's
+        assert not (await refused.read_attribute(ua.AttributeIds.AccessLevel)).Value.Value & writable
         await allowed.write_value(ua.DataValue(ua.Variant(77.5, ua.VariantType.Double)))
         assert gateway.sim.state.read_macro(505) == 77.5
-        refused = client.get_node(ua.NodeId("m1/Metrics/Macro/510", ns))
         with pytest.raises(ua.uaerrors.BadUserAccessDenied):
             await refused.write_value(ua.DataValue(ua.Variant(1.0, ua.VariantType.Double)))
         with pytest.raises(ua.uaerrors.BadOutOfRange):

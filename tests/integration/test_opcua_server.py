@@ -119,7 +119,7 @@ def client_pki(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 async def served(tmp_path_factory: pytest.TempPathFactory, client_pki: tuple[Path, Path]) -> AsyncIterator[Served]:
     writes = Writes()
     settings = settings_for(tmp_path_factory.mktemp("opcua-state"))
-    output = OpcUaOutput(settings, writes, writable=lambda device, metric: metric != "Macro/501")
+    output = OpcUaOutput(settings, writes, writable=lambda device, names: frozenset(names) - {"Macro/501"})
     await output.start()
     await output.device_online("m1", SPECS, birth())
     await async_wait_for(lambda: output.pending == 0, message="the birth applied")
