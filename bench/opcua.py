@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import statistics
 import subprocess
 import tempfile
 import time
@@ -203,8 +204,8 @@ def run(quick: bool = False, machines: int | None = None, duration_s: float | No
     for row in rows.values():
         runs = row.pop("runs")
         for key in KEYS:
-            values = sorted(r[key] for r in runs if key in r)
-            row[key] = values[len(values) // 2] if values else None
+            values = [r[key] for r in runs if key in r]
+            row[key] = statistics.median(values) if values else None
         result.rows.append(row)
     base = rows["off"]["cpu_us_per_cycle"]
     for mode in ("thread", "loop"):

@@ -61,7 +61,7 @@ class OpcUaConfig(_Model):
     users: list[OpcUaUser] = Field(default_factory=list)
     certificate_file: Path | None = None  # DER or PEM; else generated into <state_dir>/opcua on first start
     private_key_file: Path | None = None
-    threaded: bool = True  # the server in its own thread (the measured default, docs/opcua.md)
+    threaded: bool = False  # the server in the daemon's event loop (the measured default, docs/opcua.md)
     write_timeout_s: float = Field(default=30.0, gt=0, le=600)
     max_sessions: int = Field(default=20, ge=1, le=1000)
 

@@ -32,7 +32,7 @@ class OpcUaSettings:
     application_uri: str = "urn:focas-edge:gateway"
     namespace_uri: str = "urn:focas-edge:machines"
     server_name: str = "focas-edge"
-    threaded: bool = True  # own thread and event loop (see docs/opcua.md for the measurement)
+    threaded: bool = False  # True: its own thread and event loop (docs/opcua.md has the measurement)
     write_timeout_s: float = 30.0
     max_sessions: int = 20  # open client connections at once
 

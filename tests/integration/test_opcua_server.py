@@ -337,10 +337,10 @@ async def test_sessions_need_a_known_user(served: Served) -> None:
     assert (state / "server-key.pem").stat().st_mode & 0o077 == 0
 
 
-async def test_in_loop_mode_with_anonymous_and_no_security_when_asked(tmp_path: Path) -> None:
-    """The non-default choices: on the caller's loop, no security, anonymous allowed; and the certificate
-    made on the first start is the one a later start uses."""
-    settings = settings_for(tmp_path, threaded=False, security=("None",), allow_anonymous=True)
+async def test_threaded_with_anonymous_and_no_security_when_asked(tmp_path: Path) -> None:
+    """The non-default choices: in its own thread, no security, anonymous allowed; and the certificate made
+    on the first start is the one a later start uses."""
+    settings = settings_for(tmp_path, threaded=True, security=("None",), allow_anonymous=True)
     output = OpcUaOutput(settings)
     await output.start()
     try:
