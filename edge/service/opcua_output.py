@@ -13,10 +13,10 @@ import logging
 from typing import TYPE_CHECKING
 
 from edge.config import Config
-from edge.publish.publisher import CommandSource
+from edge.publish import CommandSource
 
 if TYPE_CHECKING:
-    from edge.command.service import CommandService
+    from edge.command import CommandService
     from edge.opcua.output import OpcUaOutput
     from edge.opcua.server import MetricWrite
     from edge.opcua.writes import WriteOutcome

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 
-from edge.collect.poller import DeviceSink
+from edge.collect import DeviceSink
 from edge.samples import MetricSpec, Sample
 
 log = logging.getLogger(__name__)
