@@ -4,6 +4,13 @@ It knows samples and metric specs (edge.samples), never FOCAS; writes reach the 
 callable the service layer hands it. asyncua is imported only by the modules that serve (output, server,
 address_space, alarms, security, values, nodes), and those only when `opcua.enabled`: `layout`, `writes`
 and `settings` are pure, and `missing_extra()` tells check-config whether the extra is installed.
+
+Rules:
+  1. This package imports only the standard library, asyncua (and its cryptography), edge.samples,
+     edge.statefile and its own modules. Never focas, config, collect, publish, command, service or cli:
+     the service layer builds its OpcUaSettings and hands it a MetricWriter (edge/service/opcua_output.py).
+  2. Every network wait has a timeout (start, stop, a write's outcome); every task it starts is its own to
+     cancel (the mailbox drain, the server thread).
 """
 
 from __future__ import annotations
