@@ -27,7 +27,7 @@ from edge.service.gc_tuning import tune_collector
 from edge.service.opcua_output import opcua_output
 from edge.service.outputs import Outputs
 from edge.service.sdnotify import SystemdNotifier
-from edge.service.settings import command_settings, machine_settings, publish_settings
+from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
@@ -49,7 +49,7 @@ class Daemon:
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
-        self.opcua = opcua_output(config, self.commands)  # None unless opcua.enabled
+        self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
         self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command

@@ -1,5 +1,4 @@
-"""The daemon's OPC UA output: the `opcua:` section made a running server, its writes bound to the command
-layer.
+"""The daemon's OPC UA output: the server (edge.opcua) with its writes bound to the command layer.
 
 edge.opcua knows nothing of edge.command: this module hands it a MetricWriter that turns a client's write
 into `CommandService.write_metrics` (policy, bounds, queue, read-back, audit: the path JSON and DCMD
@@ -12,22 +11,21 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
-from edge.config import Config
 from edge.publish import CommandSource
 
 if TYPE_CHECKING:
     from edge.command import CommandService
     from edge.opcua.output import OpcUaOutput
     from edge.opcua.server import MetricWrite
+    from edge.opcua.settings import OpcUaSettings
     from edge.opcua.writes import WriteOutcome
 
 log = logging.getLogger(__name__)
 
 
-def opcua_output(config: Config, commands: CommandService) -> OpcUaOutput | None:
-    """The configured OPC UA output (not started), or None when the section is off."""
-    section = config.opcua
-    if not section.enabled:
+def opcua_output(settings: OpcUaSettings | None, commands: CommandService) -> OpcUaOutput | None:
+    """The OPC UA output (not started), or None when the section is off or the extra is missing."""
+    if settings is None:
         return None
     from edge.opcua import missing_extra
 
@@ -36,17 +34,8 @@ def opcua_output(config: Config, commands: CommandService) -> OpcUaOutput | None
         log.error("opcua.enabled is true but %s; running without the OPC UA server", missing)
         return None
     from edge.opcua.output import OpcUaOutput
-    from edge.opcua.settings import OpcUaSettings
 
     logging.getLogger("asyncua").setLevel(max(logging.WARNING, logging.getLogger("asyncua").getEffectiveLevel()))
-    spb = config.mqtt.sparkplug
-    node = f"{spb.group_id}:{spb.edge_node_id}" if spb is not None else "gateway"
-    settings = OpcUaSettings(
-        state_dir=config.resolved_state_dir, host=section.host, port=section.port, path=section.path,
-        security=tuple(section.security), allow_anonymous=section.allow_anonymous, users=section.read_users(),
-        certificate_file=section.certificate_file, private_key_file=section.private_key_file,
-        application_uri=f"urn:focas-edge:{node}", threaded=section.threaded,
-        write_timeout_s=section.write_timeout_s, max_sessions=section.max_sessions)
     return OpcUaOutput(settings, CommandWriter(commands), commands.writable_metrics)
 
 
