@@ -46,6 +46,7 @@ class MachineSpec:
     param_write_enabled: bool = False
     macros: dict[int, float | None] = field(default_factory=dict)
     faults: dict[str, Any] = field(default_factory=dict)
+    clock_macro: int | None = None  # a macro that reads as the CNC's clock when it answers (MachineState)
 
 
 class Machine:
@@ -62,6 +63,7 @@ class Machine:
                                   seed=index if spec.seed is None else spec.seed,
                                   start_parts=spec.start_parts)
         self.state.param_write_enabled = spec.param_write_enabled
+        self.state.clock_macro = spec.clock_macro
         for number, value in spec.macros.items():
             self.state.write_macro(number, value, protocol="scenario")
         self.faults = FaultPlan()

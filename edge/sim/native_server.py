@@ -66,6 +66,8 @@ from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.profiles import Profile
 from edge.sim.state import MachineState
 
+CLOCK_COMMAND = fn.READ_CLOCK.command
+
 log = logging.getLogger(__name__)
 
 PROTOCOL = "native"  # the name writes carry in the machine's write log
@@ -468,12 +470,13 @@ class ServerStats:
     close_pdus: int = 0
     subpackets: int = 0
     last_batch: int = 0  # subpackets in the latest data PDU
+    clock_pdus: int = 0  # data PDUs that read the clock and nothing else (a collector's clock-only reads)
     commands: Counter[int] = field(default_factory=Counter)
 
     def describe(self) -> dict[str, Any]:
         return {"connections": self.connections, "refused": self.refused, "open_pdus": self.open_pdus,
                 "data_pdus": self.data_pdus, "close_pdus": self.close_pdus, "subpackets": self.subpackets,
-                "last_batch": self.last_batch}
+                "last_batch": self.last_batch, "clock_pdus": self.clock_pdus}
 
 
 class NativeServer:
@@ -587,7 +590,10 @@ class NativeServer:
         self.stats.data_pdus += 1
         self.stats.subpackets += len(plans)
         self.stats.last_batch = len(plans)
-        self.stats.commands.update([plan.command for plan in plans])
+        commands = [plan.command for plan in plans]
+        self.stats.commands.update(commands)
+        if commands and all(command == CLOCK_COMMAND for command in commands):
+            self.stats.clock_pdus += 1
         if self.faults.take_drop():
             writer.transport.abort()
             return "dropped"

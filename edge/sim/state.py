@@ -225,6 +225,20 @@ def _initial_pmc(profile: Profile) -> dict[str, bytearray]:
     return areas
 
 
+CLOCK_MACRO_MODULO = 1000.0  # a macro holds about nine digits: seconds modulo 1000 with milliseconds
+
+
+def clock_macro_value(epoch_s: float) -> float:
+    """What the clock macro reads at a CNC time (epoch seconds): seconds modulo 1000, to the millisecond."""
+    return round(epoch_s % CLOCK_MACRO_MODULO, 3)
+
+
+def clock_macro_error(stamp_s: float, value: float) -> float:
+    """A source timestamp (epoch seconds) minus the CNC clock a clock macro `value` recorded, in seconds
+    (-500..500: the macro wraps every 1000 s)."""
+    return (stamp_s - value + CLOCK_MACRO_MODULO / 2) % CLOCK_MACRO_MODULO - CLOCK_MACRO_MODULO / 2
+
+
 def _zone(name: str | tzinfo) -> tzinfo:
     return ZoneInfo(name) if isinstance(name, str) else name
 
@@ -270,6 +284,9 @@ class MachineState:
         self._manual_alarms: list[ActiveAlarm] = []
         self._cycle_alarm: ActiveAlarm | None = None
         self.param_write_enabled = False
+        # A test hook: this macro reads as the CNC's own clock at the moment it answers (clock_macro_value),
+        # so a subscriber can compare a published source timestamp with the clock it claims to be.
+        self.clock_macro: int | None = None
         self.emergency = False
         self.mode = AUT_MEM
         self.write_log: list[WriteRecord] = []
@@ -668,9 +685,14 @@ class MachineState:
         with self._lock:
             macros = self._macros
             try:
-                return [macros[n] for n in range(first, last + 1)]
+                values = [macros[n] for n in range(first, last + 1)]
             except KeyError:
                 gap = f"range #{first}-#{last} spans a gap"
+            else:
+                clock = self.clock_macro
+                if clock is not None and first <= clock <= last:
+                    values[clock - first] = clock_macro_value(self._time() + self._clock_offset)
+                return values
         raise cnc_error(EW_NUMBER, "cnc_rdmacror", message=gap)
 
     def read_macro(self, number: int) -> float | None:

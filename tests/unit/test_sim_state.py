@@ -33,7 +33,7 @@ from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.native_server import answer_subpacket
 from edge.sim.profiles import PROFILES, get_profile
 from edge.sim.scenario import load_scenario, parse_scenario
-from edge.sim.state import ALARM_HISTORY_SIZE, CycleSpec, MachineState
+from edge.sim.state import ALARM_HISTORY_SIZE, CycleSpec, MachineState, clock_macro_error, clock_macro_value
 
 T0 = 1_750_000_000.0  # 2025-06-15 15:06:40 UTC
 
@@ -330,6 +330,23 @@ def test_setting_the_clock_moves_the_offset() -> None:
     with pytest.raises(CncError) as bad:
         state.set_time_of_day(25, 0, 0)
     assert bad.value.code == EW_DATA
+
+
+def test_the_clock_macro_reads_as_the_cnc_clock_when_it_answers() -> None:
+    """The hook the timestamp tests and the fleet benchmark compare stamps with (seconds mod 1000, ms)."""
+    state, clock = machine(clock_offset=7.25)
+    state.write_macro(500, 1.0)
+    state.write_macro(501, 3.0)
+    state.write_macro(502, None)
+    assert state.read_macros(500, 502)[0] == 1.0  # no hook: an ordinary macro
+    state.clock_macro = 500
+    clock.tick(0.4567)
+    value = state.read_macros(500, 502)[0]
+    assert value == clock_macro_value(T0 + 0.4567 + 7.25) == round((T0 + 7.7067) % 1000, 3)
+    assert state.read_macros(501, 502) == [3.0, None]  # the others are what they hold
+    assert clock_macro_error(T0 + 7.7067 + 0.012, value) == pytest.approx(0.012, abs=1e-3)
+    assert clock_macro_error(T0 + 7.7067 - 0.012, value) == pytest.approx(-0.012, abs=1e-3)
+    assert clock_macro_error(999.995, 0.005) == pytest.approx(-0.01)  # across the wrap of the modulo
 
 
 def test_timers() -> None:

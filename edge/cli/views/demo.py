@@ -33,6 +33,9 @@ PROFILES = ("30i", "16i", "0i-F")
 MULTI_PATH_PROFILE = "31i-2p"  # for a machine configured with paths: 2 (a twin-turret lathe)
 
 
+NDEATH_WAIT_S = 3.0
+
+
 def broker_answers(host: str, port: int) -> bool:
     with contextlib.suppress(OSError), socket.create_connection((host, port), timeout=0.5):
         return True
@@ -133,6 +136,8 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
     try:
         code = await daemon.run()
     finally:
+        if mqtt.sparkplug is not None:  # let the watcher print the NDEATH the daemon just sent
+            await asyncio.to_thread(watcher.node_death_seen.wait, NDEATH_WAIT_S)
         if drawing is not None and view is not None:
             drawing.cancel()
             view.draw()
