@@ -5,19 +5,19 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 RUN_STAMP := $(VENV)/.run-stamp
 
-.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check browser-check venv \
+.PHONY: run test lint unit integration bench fuzz soak sim clean broker-check browser-check opcua-client-check venv \
         deb systemd-check arm64-check
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,dev,demo,bench]'
+	$(PY) -m pip install --quiet -e '.[test,dev,demo,bench,opcua]'
 	@touch $(STAMP) $(RUN_STAMP)
 
 # What running needs and nothing else (no test, lint or bench tools): the package and the embedded broker.
 $(RUN_STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -e '.[demo]'
+	$(PY) -m pip install --quiet -e '.[demo,opcua]'
 	@touch $(RUN_STAMP)
 
 venv: $(STAMP)
@@ -28,7 +28,7 @@ run: $(RUN_STAMP)
 	$(PY) -m edge.cli.views.demo $(if $(RAW),--raw) $(ARGS)
 
 ## make test: lint, then the whole suite (unit + integration with a real mosquitto)
-test: $(STAMP) broker-check browser-check lint
+test: $(STAMP) broker-check browser-check opcua-client-check lint
 	$(PY) -m pytest -q
 
 lint: $(STAMP)
@@ -38,7 +38,7 @@ lint: $(STAMP)
 unit: $(STAMP)
 	$(PY) -m pytest -q tests/unit
 
-integration: $(STAMP) broker-check browser-check
+integration: $(STAMP) broker-check browser-check opcua-client-check
 	$(PY) -m pytest -q tests/integration
 
 broker-check:
@@ -46,6 +46,9 @@ broker-check:
 
 browser-check:
 	@bash scripts/ensure-chromium.sh
+
+opcua-client-check:
+	@bash scripts/ensure-node-opcua.sh
 
 sim: $(STAMP)
 	$(VENV)/bin/focas-edge sim --machines 3
@@ -62,7 +65,7 @@ fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q tests -k "property or fuzz"
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) .node .pytest_cache .mypy_cache .ruff_cache .hypothesis
 
 ## make deb: dist/focas-edge_<version>_<arch>.deb for this machine's architecture (dpkg-deb; docs/install.md)
 deb:

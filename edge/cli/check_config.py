@@ -14,6 +14,7 @@ from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
 from edge.config import Config, load_config
 from edge.config.service_access import SERVICE_USER, service_problems, state_dir_problem
+from edge.opcua import missing_extra
 
 
 def register(subparsers: Any) -> None:
@@ -57,6 +58,9 @@ def usability_problems(config: Config, service_user: str | None) -> list[str]:
         problems.append(state_dir_problem(config.state_dir))
     if service_user is not None:
         problems.extend(service_problems(config, service_user))
+    if config.opcua.enabled:
+        missing = missing_extra()
+        problems.append(f"opcua.enabled: {missing}" if missing is not None else None)
     return [p for p in problems if p is not None]
 
 
@@ -71,6 +75,11 @@ def summary(config: Config, source: str) -> str:
         lines.append(f"  sparkplug  spBv1.0/{sp.group_id}/+/{sp.edge_node_id}{host}")
     if "json" in mqtt.formats:
         lines.append(f"  json       {mqtt.json_topics.prefix}/<machine>/...")
+    if config.opcua.enabled:
+        ua = config.opcua
+        who = ", ".join([u.username for u in ua.users] + (["anonymous"] if ua.allow_anonymous else []))
+        lines.append(f"  opcua      opc.tcp://{ua.host}:{ua.port}{ua.path}  security {', '.join(ua.security)}  "
+                     f"users {who}")
     lines.append(f"  state_dir  {config.resolved_state_dir}")
     lines.append(f"  writes     {'enabled' if config.writes.enabled else 'disabled'}"
                  f" ({len(config.writes.allow)} global allow rule(s))")

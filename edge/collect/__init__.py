@@ -15,7 +15,7 @@ Other packages import collect through the names below.
 
 from edge.collect.axis_numbers import refused_as_axis_type
 from edge.collect.plan import MachinePlan, PlannedRead, metric_values
-from edge.collect.poller import MachinePoller, SessionFactory, default_session
+from edge.collect.poller import DeviceSink, MachinePoller, SessionFactory, default_session
 from edge.collect.settings import (
     MachineSettings,
     MacroValues,
@@ -30,6 +30,7 @@ from edge.collect.tickgrid import TickGrid
 
 __all__ = [
     "CYCLE_BUCKETS",
+    "DeviceSink",
     "MachinePlan",
     "MachinePoller",
     "MachineSettings",

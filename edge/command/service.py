@@ -1,6 +1,6 @@
-"""Remote writes arriving over MQTT (Sparkplug DCMD, JSON cmd topic): the daemon's entry point.
+"""Remote writes (Sparkplug DCMD, the JSON cmd topic, OPC UA): the daemon's entry point.
 
-Both inputs end in the same steps: validate (edge.command.requests, edge.command.limits), authorise
+Every input ends in `execute`, the same steps: validate (edge.command.requests, edge.command.limits), authorise
 (edge.command.policy), audit, queue on the machine's write queue (edge.command.executor), reply (JSON)
 or only audit and count (DCMD: Sparkplug 3.0 has no reply message). A request is checked completely
 before any of it is queued: if one write of a list is refused, none is written.
@@ -79,21 +79,47 @@ class CommandService:
         self._queues.clear()
         self.audit.close()
 
-    # ---- JSON ----------------------------------------------------------------------------------------
-    async def on_json_command(self, device_id: str, payload: bytes, source: CommandSource) -> None:
+    # ---- the one entry point ---------------------------------------------------------------------------
+    async def execute(self, device_id: str, items: Sequence[RequestItem], source: CommandSource) -> list[WriteResult]:
+        """Carry out one request, whatever it came from (JSON, Sparkplug DCMD, OPC UA): every item checked
+        (policy, bounds on the number the CNC holds), then queued, read back, audited and counted; a result
+        per item, in order."""
         self._counters["requests"] += 1
         machine = self._machine(device_id)
+        if machine is None:
+            return self._refuse_all(device_id, items, source, CommandRefused(
+                ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured"))
+        return await self._run(machine, items, source)
+
+    async def write_metrics(self, device_id: str, metrics: Sequence[tuple[str, object]], source: CommandSource,
+                            client: str | None = None) -> list[WriteResult]:
+        """Writes named by metric (DCMD, OPC UA): each name resolved to the CNC target behind it in the
+        machine's poll plan, adjacent PMC elements merged, then `execute`."""
+        return await self.execute(device_id, self._metric_items(device_id, metrics, source, client), source)
+
+    def refuse_metric(self, device_id: str, metric: str | None, code: str, reason: str, source: CommandSource,
+                      client: str | None = None) -> None:
+        """A metric write refused before it became a request (unknown device or metric, read-only, wrong
+        datatype, a number outside its datatype): one audit line and the outcome counters, like any other
+        refusal."""
+        try:
+            error = ErrorCode(code)
+        except ValueError:  # not expected: the callers name ErrorCode values
+            error = ErrorCode.MALFORMED
+        refusal = CommandRefused(error, reason)
+        item = RequestItem(0, None, client, None, metric, None, refusal)
+        self._record(device_id, source, item, WriteResult.refused(None, refusal))
+
+    # ---- JSON ----------------------------------------------------------------------------------------
+    async def on_json_command(self, device_id: str, payload: bytes, source: CommandSource) -> None:
         try:
             parsed = parse_request(payload, self.settings.max_payload_bytes)
         except CommandRefused as refusal:
+            self._counters["requests"] += 1
             self._record(device_id, source, None, WriteResult.refused(None, refusal))
             await self.publisher.publish_json_reply(device_id, request_error(refusal.code, refusal.message), source)
             return
-        if machine is None:
-            results = self._refuse_all(device_id, parsed.items, source, CommandRefused(
-                ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured"))
-        else:
-            results = await self._run(machine, list(parsed.items), source)
+        results = await self.execute(device_id, parsed.items, source)
         replies = [reply(item.id, item.target_text, result) for item, result in zip(parsed.items, results,
                                                                                      strict=True)]
         if parsed.is_list:
@@ -125,15 +151,8 @@ class CommandService:
 
     def on_device_command_refused(self, device_id: str, metric: str | None, code: str, reason: str,
                                   source: CommandSource) -> None:
-        """A DCMD metric the publisher refused (unknown device or metric, read-only, wrong datatype, a
-        number outside its datatype): one audit line and the outcome counters, like any other refusal."""
-        try:
-            error = ErrorCode(code)
-        except ValueError:  # not expected: the publisher names ErrorCode values
-            error = ErrorCode.MALFORMED
-        refusal = CommandRefused(error, reason)
-        item = RequestItem(0, None, None, None, metric, None, refusal)
-        self._record(device_id, source, item, WriteResult.refused(None, refusal))
+        """A DCMD metric the publisher refused: audited and counted (`refuse_metric`)."""
+        self.refuse_metric(device_id, metric, code, reason, source)
 
     def _start_dcmd(self, key: tuple[str, str]) -> None:
         batch = self._dcmd.pop(key)
@@ -141,29 +160,28 @@ class CommandService:
         task.add_done_callback(lambda _t: batch.done.set())
 
     async def _run_dcmd(self, batch: _DcmdBatch) -> None:
-        self._counters["requests"] += 1
-        machine = self._machine(batch.device_id)
+        await self.write_metrics(batch.device_id, batch.metrics, batch.source)
+
+    def _metric_items(self, device_id: str, metrics: Sequence[tuple[str, object]], source: CommandSource,
+                      client: str | None) -> list[RequestItem]:
+        machine = self._machine(device_id)
         items: list[RequestItem] = []
-        for index, (name, value) in enumerate(batch.metrics):
+        for index, (name, value) in enumerate(metrics):
             try:
-                op = self._dcmd_op(machine, batch.device_id, name, value)
+                op = self._dcmd_op(machine, device_id, name, value)
             except CommandRefused as refusal:
-                self._counters["dcmd_ignored"] += 1
-                log.warning("DCMD metric ignored machine=%s metric=%s code=%s reason=%s", batch.device_id,
-                            name, refusal.code, refusal.message)
-                items.append(RequestItem(index, None, None, None, name, value, refusal))
+                if source.format == "sparkplug":
+                    self._counters["dcmd_ignored"] += 1
+                log.warning("metric write ignored source=%s machine=%s metric=%s code=%s reason=%s", source.format,
+                            device_id, name, refusal.code, refusal.message)
+                items.append(RequestItem(index, None, client, None, name, value, refusal))
             else:
-                items.append(RequestItem(index, None, None, op, op.text, op.reply_value()))
-        if machine is None:
-            for item in items:
-                assert item.refused is not None
-                self._record(batch.device_id, batch.source, item, WriteResult.refused(None, item.refused))
-            return
+                items.append(RequestItem(index, None, client, op, op.text, op.reply_value()))
         ops = [item.op for item in items if item.op is not None]
-        if len(ops) == len(items):
-            items = [RequestItem(i, None, None, op, op.text, op.reply_value())
+        if machine is not None and len(ops) == len(items):
+            items = [RequestItem(i, None, client, op, op.text, op.reply_value())
                      for i, op in enumerate(merge_adjacent(ops))]
-        await self._run(machine, items, batch.source)
+        return items
 
     def _dcmd_op(self, machine: MachineSettings | None, device_id: str, name: str, value: object) -> WriteOp:
         if machine is None:
@@ -283,6 +301,21 @@ class CommandService:
             value=result.op.reply_value() if result.op is not None else (item.requested if item else None),
             old=result.old, new=result.read_back, outcome=result.outcome,
             message=result.note if result.ok else result.message))
+
+    def writable_metrics(self, device_id: str, metrics: Sequence[str]) -> frozenset[str]:
+        """Which of `metrics` have a CNC target the machine's write policy covers (whatever the value): what
+        an OPC UA node's AccessLevel shows. A write itself is still checked in full by `execute`."""
+        machine = self._machine(device_id)
+        policy = self.settings.policies.get(device_id)
+        if machine is None or policy is None or not policy.enabled:
+            return frozenset()
+        plan = self._plan(machine)
+        covered = set()
+        for name in metrics:
+            target = metric_target(plan, name)
+            if target is not None and any(rule.pattern.covers(target) for rule in policy.allow):
+                covered.add(name)
+        return frozenset(covered)
 
     def _machine(self, machine_id: str) -> MachineSettings | None:
         return self.settings.machines.get(machine_id)

@@ -8,6 +8,7 @@ line in the file; soft findings land in `Config.warnings`. What lives here:
   poll            `poll:` periods, macro and PMC ranges, parameter and diagnosis numbers; the poll grid
   writes          `writes:` allow rules, rate limit, one machine's effective WritePolicy
   machines        `machines:` endpoint and transport rules, timeouts, CNC paths, alarms settings
+  opcua           `opcua:` the optional OPC UA server: endpoint, security modes, users (secrets as for mqtt)
   root            Config, the top level (http, spool, state_dir) and the questions across sections
   load            YAML (a key given twice is refused) to Config, problems with paths and lines, cross-checks
   merge, lines    `defaults:`/`templates:` expanded into each machine; problem paths mapped to line numbers

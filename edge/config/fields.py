@@ -9,6 +9,7 @@ lets a model validator name the key below it that is wrong (load.format_errors t
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Annotated
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
@@ -48,6 +49,13 @@ def check_sparkplug_id(value: str) -> str:
 
 
 SparkplugId = Annotated[str, BeforeValidator(lambda v: check_sparkplug_id(v) if isinstance(v, str) else v)]
+
+
+def check_file(value: Path | None) -> Path | None:
+    """A file the config names (certificate, key) exists when the file is read, not at its first use."""
+    if value is not None and not value.is_file():
+        raise ValueError(f"no such file: {value}")
+    return value
 
 
 def check_metric_name(value: str) -> str:

@@ -27,6 +27,7 @@ from edge.config.lines import with_lines
 from edge.config.machines import HISTORY_DEPTH_MAX, HISTORY_DEPTH_MIN, _endpoint_rules
 from edge.config.merge import expand_machines
 from edge.config.mqtt import FORMATS, _mqtt_rules, read_secret
+from edge.config.opcua import opcua_secret_problems
 from edge.config.root import Config, _duplicate_ids
 
 
@@ -53,14 +54,16 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     except ValidationError as exc:
         found = expansion_problems + format_errors(exc)
         found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data), *_machine_cross_checks(data),
-                                   *_secret_problems(data, environ))
+                                   *_secret_problems(data, environ),
+                                   *opcua_secret_problems(data.get("opcua"), environ))
                   if p not in found]
         raise ConfigError(with_lines(found, text), source) from None
-    problems = list(_secret_problems(data, environ))
+    problems = [*_secret_problems(data, environ), *opcua_secret_problems(data.get("opcua"), environ)]
     if problems:
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
     config._warnings.extend(_native_only_warnings(config))
+    config._warnings.extend(config.opcua.warnings())
     state_directory = environ.get("STATE_DIRECTORY", "").split(":")[0]
     if state_directory:
         config._state_dir = Path(state_directory)

@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 from pydantic import BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from edge import ConfigError
-from edge.config.fields import SparkplugId, _at, _Model
+from edge.config.fields import SparkplugId, _at, _Model, check_file
 
 Format = Literal["sparkplug", "json"]
 FORMATS: tuple[Format, ...] = ("sparkplug", "json")
@@ -31,9 +31,7 @@ class TlsConfig(_Model):
     @field_validator("ca_file", "cert_file", "key_file")
     @classmethod
     def _readable(cls, value: Path | None) -> Path | None:
-        if value is not None and not value.is_file():
-            raise ValueError(f"no such file: {value}")
-        return value
+        return check_file(value)
 
     @model_validator(mode="after")
     def _key_needs_cert(self) -> TlsConfig:

@@ -1,5 +1,5 @@
-"""The file's top level: Config holds every section (mqtt, machines, alarms, writes, http, spool, state_dir,
-poll_grid_s) and answers the questions that span sections: the devices of multi-path machines, a
+"""The file's top level: Config holds every section (mqtt, machines, alarms, writes, http, spool, opcua,
+state_dir, poll_grid_s) and answers the questions that span sections: the devices of multi-path machines, a
 machine's alarms and effective write policy, the poll grid in use.
 """
 
@@ -14,6 +14,7 @@ from pydantic import ByteSize, Field, PrivateAttr, field_validator, model_valida
 from edge.config.fields import Duration, _Model
 from edge.config.machines import AlarmsConfig, MachineConfig
 from edge.config.mqtt import MqttConfig
+from edge.config.opcua import OpcUaConfig
 from edge.config.poll import AUTO_POLL_GRID_CAP_S, PollGrid
 from edge.config.writes import MachineWrites, WritePolicy, WritesConfig
 
@@ -40,6 +41,7 @@ class Config(_Model):
     state_dir: Path | None = None
     http: HttpConfig = Field(default_factory=HttpConfig)
     spool: SpoolConfig = Field(default_factory=SpoolConfig)
+    opcua: OpcUaConfig = Field(default_factory=OpcUaConfig)
     # Poll wake-ups are rounded up to this grid, so the machines due in one slot share one event-loop turn
     # (docs/performance.md): a poll is at most this much later than due, never earlier, never skipped.
     # None is `auto` (the default): see poll_grid_step_s.

@@ -74,6 +74,12 @@ def named_files(config: Config) -> list[tuple[str, Path]]:
                 files.append((f"mqtt.tls.{key}", Path(path)))
     if mqtt.password_file is not None:
         files.append(("mqtt.password_file", Path(mqtt.password_file)))
+    opcua = config.opcua
+    if opcua.enabled:
+        files += [(f"opcua.{key}", Path(path)) for key in ("certificate_file", "private_key_file")
+                  if (path := getattr(opcua, key)) is not None]
+        files += [(f"opcua.users[{index}].password_file", Path(user.password_file))
+                  for index, user in enumerate(opcua.users) if user.password_file is not None]
     return files
 
 

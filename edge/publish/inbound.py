@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import Literal
 
 from edge.publish.holding import Format
 
@@ -16,7 +17,7 @@ from edge.publish.holding import Format
 class CommandSource:
     """Where a command came from, so the reply (if any) can go back the same way."""
 
-    format: Format
+    format: Format | Literal["opcua"]  # an OPC UA write has no reply topic: its Write response answers it
     topic: str
     response_topic: str | None = None  # MQTT 5 request/response
     correlation_data: bytes | None = None

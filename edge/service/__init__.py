@@ -4,7 +4,10 @@ What lives here:
 
     daemon        the collector daemon: one publisher, a poller per machine, signals, reload, the watchdog
     settings      the one place that turns the pydantic config into the settings dataclasses of the
-                  layers below (PublishSettings, MachineSettings, PollSettings, CommandSettings)
+                  layers below (PublishSettings, MachineSettings, PollSettings, CommandSettings,
+                  OpcUaSettings)
+    outputs       every output of the collector's samples behind one sink: the publisher, then the others
+    opcua_output  the optional OPC UA server as one of those outputs, its writes bound to the command layer
     daemon_view   the read-only view of a running daemon that the status endpoint and the live view share
     status_http   /healthz, /metrics (Prometheus), /status.json and the status page
     status_page   status.json's document and the page rendered from it
@@ -14,7 +17,7 @@ What lives here:
 
 Rules:
 
-1. service may import every layer below it (command, collect, publish, config, focas, the root types);
+1. service may import every layer below it (command, collect, publish, opcua, config, focas, the root types);
    only edge/cli imports service.
 2. Only ``settings`` (and the daemon's reload comparison) read the pydantic config models; collect and
    command receive dataclasses.
@@ -23,4 +26,5 @@ Rules:
    Import each module by its path.
 """
 
-__all__ = ["daemon", "daemon_view", "gc_tuning", "logformat", "sdnotify", "settings", "status_http", "status_page"]
+__all__ = ["daemon", "daemon_view", "gc_tuning", "logformat", "opcua_output", "outputs", "sdnotify", "settings",
+           "status_http", "status_page"]

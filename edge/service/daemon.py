@@ -24,8 +24,10 @@ from edge.config.service_access import state_dir_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
 from edge.service.gc_tuning import tune_collector
+from edge.service.opcua_output import opcua_output
+from edge.service.outputs import Outputs
 from edge.service.sdnotify import SystemdNotifier
-from edge.service.settings import command_settings, machine_settings, publish_settings
+from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
@@ -47,6 +49,8 @@ class Daemon:
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
+        self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
+        self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.on_device_command_refused = self.commands.on_device_command_refused
@@ -64,6 +68,7 @@ class Daemon:
         await self._start_status_http()
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
+        await self._start_opcua()
         for machine in self.config.devices():
             self._start_machine(machine)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
@@ -103,6 +108,8 @@ class Daemon:
         self.spool.close()  # after the publisher spooled what it could not confirm
         await asyncio.gather(*(p.close() for p in self.pollers.values()), return_exceptions=True)
         self._tasks.clear()
+        if self.opcua is not None:
+            await self.opcua.stop()
         if self.status_http is not None:
             await self.status_http.stop()
             self.status_http = None
@@ -117,6 +124,19 @@ class Daemon:
         await server.start()
         self.status_http = server
 
+    async def _start_opcua(self) -> None:
+        """The optional OPC UA server; one that cannot start (port taken, unreadable certificate) is an error
+        logged, and the daemon goes on polling and publishing without it."""
+        if self.opcua is None:
+            return
+        try:
+            await self.opcua.start()
+        except Exception as exc:
+            log.error("OPC UA server not started, running without it endpoint=%s error=%r",
+                      self.opcua.settings.endpoint, exc)
+            self.opcua = None
+            self.outputs.others.clear()
+
     def _install_signals(self) -> None:
         loop = asyncio.get_running_loop()
         with contextlib.suppress(NotImplementedError, RuntimeError):
@@ -126,7 +146,7 @@ class Daemon:
 
     # ---- machines ------------------------------------------------------------------------------------
     def _start_machine(self, machine: MachineConfig) -> None:
-        poller = MachinePoller(machine_settings(self.config, machine), self.publisher, self.state_dir,
+        poller = MachinePoller(machine_settings(self.config, machine), self.outputs, self.state_dir,
                                self.session_factory, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
@@ -148,7 +168,7 @@ class Daemon:
         if poller is not None:
             if poller.online:
                 with contextlib.suppress(Exception):
-                    await self.publisher.device_offline(machine_id)
+                    await self.outputs.device_offline(machine_id)
             await poller.close()
 
     async def reload(self) -> None:
@@ -166,6 +186,8 @@ class Daemon:
             log.warning("reload: mqtt settings changed; they take effect at the next restart")
         if new.http != self.config.http:
             log.warning("reload: http settings changed; they take effect at the next restart")
+        if new.opcua != self.config.opcua:
+            log.warning("reload: opcua settings changed; they take effect at the next restart")
         step = new.poll_grid_step_s
         if step != self.tick_grid.step_s:
             log.info("reload: poll grid %gs -> %gs", self.tick_grid.step_s, step)

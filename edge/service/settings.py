@@ -16,6 +16,7 @@ from edge.collect import (
 )
 from edge.command import AllowRule, CommandSettings, RateLimit, WritePolicy
 from edge.config import AlarmsConfig, Config, MachineConfig, PollPlan
+from edge.opcua.settings import OpcUaSettings
 from edge.publish.settings import PublishSettings
 
 
@@ -126,3 +127,19 @@ def write_policy(config: Config, machine: MachineConfig) -> WritePolicy:
         rate_limit=RateLimit(policy.rate_limit.max_writes, policy.rate_limit.per_s),
         reconnect_deadline_s=policy.reconnect_deadline_s,
     )
+
+
+def opcua_settings(config: Config) -> OpcUaSettings | None:
+    """The OPC UA server's settings with its users' passwords read (at start, never logged); None when the
+    `opcua:` section is off."""
+    section = config.opcua
+    if not section.enabled:
+        return None
+    spb = config.mqtt.sparkplug
+    node = f"{spb.group_id}:{spb.edge_node_id}" if spb is not None else "gateway"
+    return OpcUaSettings(
+        state_dir=config.resolved_state_dir, host=section.host, port=section.port, path=section.path,
+        security=tuple(section.security), allow_anonymous=section.allow_anonymous, users=section.read_users(),
+        certificate_file=section.certificate_file, private_key_file=section.private_key_file,
+        application_uri=f"urn:focas-edge:{node}", threaded=section.threaded,
+        write_timeout_s=section.write_timeout_s, max_sessions=section.max_sessions)

@@ -20,10 +20,10 @@ def dry_run(target: str, tmp_path: Path, *variables: str) -> str:
     return done.stdout
 
 
-def test_make_run_installs_the_package_and_the_demo_broker_only(tmp_path: Path) -> None:
+def test_make_run_installs_the_package_the_demo_broker_and_the_opcua_extra_only(tmp_path: Path) -> None:
     commands = dry_run("run", tmp_path)
     installs = [line for line in commands.splitlines() if "pip install" in line]
-    assert installs == [f"{tmp_path / 'venv'}/bin/python -m pip install --quiet -e '.[demo]'"], commands
+    assert installs == [f"{tmp_path / 'venv'}/bin/python -m pip install --quiet -e '.[demo,opcua]'"], commands
     assert "-m edge.cli.views.demo" in commands and "--raw" not in commands
 
 
@@ -34,8 +34,9 @@ def test_make_run_raw_is_one_variable_away(tmp_path: Path) -> None:
 
 def test_make_test_still_installs_everything_and_sets_up_broker_and_browser(tmp_path: Path) -> None:
     commands = dry_run("test", tmp_path)
-    assert "-e '.[test,dev,demo,bench]'" in commands
+    assert "-e '.[test,dev,demo,bench,opcua]'" in commands
     assert "scripts/ensure-mosquitto.sh" in commands and "scripts/ensure-chromium.sh" in commands
+    assert "scripts/ensure-node-opcua.sh" in commands
 
 
 def test_the_demo_state_directory_is_not_tracked() -> None:

@@ -113,6 +113,11 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
     print(f"== subscribe: mosquitto_sub -h {mqtt.host} -p {port} -t 'spBv1.0/{group}/#' -t '{prefix}/#' -v",
           flush=True)
     print(f"== or:        .venv/bin/focas-edge watch --host {mqtt.host} --port {port}", flush=True)
+    if config.opcua.enabled:
+        opcua = config.opcua
+        users = ", ".join(user.username for user in opcua.users) or "anonymous"
+        print(f"== OPC UA:    opc.tcp://{opcua.host}:{opcua.port}{opcua.path} (user {users}; the README says how to "
+              "browse it)", flush=True)
     print("== Ctrl-C stops everything" + ("" if raw else "; `make run RAW=1` shows every message decoded"),
           flush=True)
 

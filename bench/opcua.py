@@ -1,0 +1,225 @@
+"""OPC UA server cost: the fleet benchmark's machines (100 x 10 Hz by default) with the server off, on in its
+own thread, and on in the daemon's event loop, each time with one client (its own process, Sign&Encrypt,
+user + password) subscribed to every metric of every machine.
+
+Per mode: the daemon's CPU (user+sys) per machine-cycle and in cores, achieved cycles, poll overruns,
+change-to-broker p99 (MQTT, the same subscriber as the fleet benchmark: does OPC UA disturb it?) and, with
+the server on, change-to-client p50/p99 (the simulator stamps a macro with its clock; the client notes
+receipt) and sample-to-client (SourceTimestamp -> receipt). Targets from issue 28: extra CPU <= 30 % over
+the fleet without the server, change-to-client p99 <= 100 ms.
+
+    python -m bench opcua [--quick] [--sizes 100] [--duration 20] [--repeat 1]
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from bench.fleet import (
+    GROUP,
+    FleetOptions,
+    _window,
+    config_text,
+    start_fleet_sims,
+    wait_until,
+)
+from bench.procs import REPO, DaemonProcess, SimProcess, python_env
+from bench.report import Check, Result, percentile
+from bench.simproc import STAMP_MODULO
+from bench.subscriber import LatencySubscriber
+from bench.workload import STAMP_MACRO
+from tests.helpers import Mosquitto, free_port, mosquitto_binary
+
+MODES = ("off", "thread", "loop")
+NODE_MODULES = REPO / ".node" / "node_modules"
+USER, PASSWORD = "bench", "bench-password"
+EXTRA_CPU_TARGET_PCT = 30.0
+CHANGE_P99_TARGET_MS = 100.0
+
+
+def opcua_section(mode: str, port: int, password_file: Path) -> str:
+    if mode == "off":
+        return ""
+    return (f"opcua:\n  enabled: true\n  host: 127.0.0.1\n  port: {port}\n  threaded: {str(mode == 'thread').lower()}\n"
+            f"  users:\n    - {{username: {USER}, password_file: {password_file}}}\n")
+
+
+class ClientProcess:
+    """bench/opcua_client.js (node-opcua) as a child process: a client whose own decoding stays light, so the
+    gateway is measured, not the client (a Python client needed most of a core at 100 machines)."""
+
+    def __init__(self, url: str, pki_dir: Path, log: Path) -> None:
+        node = shutil.which("node")
+        if node is None or not (NODE_MODULES / "node-opcua").is_dir():
+            raise RuntimeError(f"the OPC UA benchmark's client needs node and node-opcua in {NODE_MODULES} "
+                               "(bash scripts/ensure-node-opcua.sh)")
+        self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
+        settings = {"url": url, "user": USER, "password": PASSWORD, "namespaceUri": "urn:focas-edge:machines",
+                    "stampMetric": f"Macro/{STAMP_MACRO}", "pki": str(pki_dir), "modulo": STAMP_MODULO}
+        self.proc = subprocess.Popen([node, str(REPO / "bench" / "opcua_client.js"), json.dumps(settings)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, text=True,
+                                     cwd=REPO, env={**python_env(), "NODE_PATH": str(NODE_MODULES)})
+
+    def answer(self, command: str | None = None) -> dict[str, Any]:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        if command is not None:
+            self.proc.stdin.write(command + "\n")
+            self.proc.stdin.flush()
+        while True:  # node-opcua prints its own banner lines; ours are the JSON objects
+            line = self.proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"OPC UA client exited with {self.proc.wait(10)}")
+            if line.startswith("{"):
+                answer = dict(json.loads(line))
+                if "error" in answer and command != "burst":
+                    raise RuntimeError(f"OPC UA client: {answer['error']}")
+                return answer
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.write("stop\n")
+                self.proc.stdin.close()
+                self.proc.wait(15)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait(10)
+        self._log.close()
+
+
+def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float) -> dict[str, Any]:
+    """One measurement; every process it starts is stopped before it returns."""
+    binary = mosquitto_binary()
+    if binary is None:
+        raise RuntimeError("mosquitto is not installed (make bench runs scripts/ensure-mosquitto.sh)")
+    workdir = Path(tempfile.mkdtemp(prefix=f"bench-opcua-{mode}-"))
+    broker = Mosquitto(binary)
+    sims: list[SimProcess] = []
+    daemon: DaemonProcess | None = None
+    subscriber: LatencySubscriber | None = None
+    client: ClientProcess | None = None
+    try:
+        broker.start()
+        broker_process = psutil.Process(broker.proc.pid) if broker.proc else None
+        subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}")
+        sims = start_fleet_sims(machines)
+        ports = [port for sim in sims for port in sim.ports]
+        password = workdir / "bench.password"
+        password.write_text(PASSWORD)
+        opcua_port = free_port()
+        config = workdir / "edge.yaml"
+        config.write_text(config_text(broker, workdir / "state", ports, 0.1)
+                          + opcua_section(mode, opcua_port, password))
+        daemon = DaemonProcess(config, workdir / "daemon.log")
+        sub, proc = subscriber, daemon.proc
+        wait_until(lambda: len(sub.births) >= machines or proc.poll() is not None, 30 + machines * 0.2,
+                   f"DBIRTH of {machines} machines")
+        if proc.poll() is not None:
+            raise RuntimeError(f"daemon exited with {proc.returncode}; see {workdir / 'daemon.log'}")
+        subscribed: dict[str, Any] = {}
+        if mode != "off":
+            started = time.monotonic()
+            client = ClientProcess(f"opc.tcp://127.0.0.1:{opcua_port}/focas-edge", workdir / "client-pki",
+                                   workdir / "client.log")
+            subscribed = client.answer()
+            subscribed["subscribe_s"] = time.monotonic() - started
+        time.sleep(warmup_s)
+        if client is not None:
+            client.answer("start")
+        measured = _window(FleetOptions(machines, duration_s=duration_s), daemon, sims, subscriber, broker_process)
+        if client is not None:
+            seen = client.answer("report")
+            measured["client_items"] = subscribed.get("items", 0)
+            measured["subscribe_s"] = subscribed.get("subscribe_s", 0.0)
+            measured["client_notifications_per_s"] = seen["notifications"] / max(seen["seconds"], 1e-9)
+            measured["client_change_p50_ms"] = percentile([v / 1000 for v in seen["change_ms"]], 50) * 1000
+            measured["client_change_p99_ms"] = percentile([v / 1000 for v in seen["change_ms"]], 99) * 1000
+            measured["client_changes_seen"] = len(seen["change_ms"])
+            measured["client_sample_p50_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 50) * 1000
+            measured["client_sample_p99_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 99) * 1000
+            measured.update(burst(client, subscriber))
+        measured["mode"] = mode
+        return measured
+    finally:
+        if client is not None:
+            client.stop()
+        if daemon is not None:
+            daemon.stop(timeout=20)
+        for sim in sims:
+            sim.stop()
+        if subscriber is not None:
+            subscriber.close()
+        broker.close()
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def burst(client: ClientProcess, subscriber: LatencySubscriber) -> dict[str, Any]:
+    """The client creates 10,000 monitored items in one request while the MQTT subscriber times the data:
+    what the poll loop and MQTT feel while the server works through the largest single step."""
+    subscriber.take()
+    overruns = subscriber.overruns or 0
+    subscriber.recording = True
+    took = client.answer("burst").get("burst_s", float("nan"))  # nan: the burst failed (client.log)
+    time.sleep(BURST_SETTLE_S)  # the latencies right after, and one node-metrics period for the overruns
+    subscriber.recording = False
+    change, _ = subscriber.take()
+    return {"burst_s": took, "burst_mqtt_change_p99_ms": percentile(change, 99) * 1000,
+            "burst_mqtt_change_max_ms": max(change, default=float("nan")) * 1000,
+            "burst_overruns": (subscriber.overruns or 0) - overruns}
+
+
+BURST_SETTLE_S = 6.0
+
+KEYS = ("cpu_us_per_cycle", "gateway_cores", "rss_mb", "achieved_pct", "overruns", "change_p99_ms",
+        "client_items", "subscribe_s", "client_notifications_per_s", "client_change_p50_ms", "client_change_p99_ms",
+        "client_sample_p50_ms", "client_sample_p99_ms", "burst_s", "burst_mqtt_change_p99_ms",
+        "burst_mqtt_change_max_ms", "burst_overruns", "steal_pct")
+
+
+def run(quick: bool = False, machines: int | None = None, duration_s: float | None = None,
+        repeats: int = 1) -> Result:
+    machines = machines or (20 if quick else 100)
+    duration = duration_s or (5.0 if quick else 20.0)
+    command = f"python -m bench opcua{' --quick' if quick else ''} --sizes {machines} --duration {duration:g} " \
+              f"--repeat {repeats}"
+    result = Result("opcua", command)
+    rows: dict[str, dict[str, Any]] = {}
+    for _ in range(repeats):
+        for mode in MODES:  # interleaved, so a slow phase of the host hits every mode alike
+            run_ = run_mode(mode, machines, duration, 1.0 if quick else 3.0)
+            print(f"  opcua {mode:<6} N={machines}: {run_['cpu_us_per_cycle']:.0f} us/cycle "
+                  f"({run_['gateway_cores']:.2f} cores), client change p99 "
+                  f"{run_.get('client_change_p99_ms', float('nan')):.0f} ms", flush=True)
+            rows.setdefault(mode, {"mode": mode, "machines": machines, "runs": []})["runs"].append(run_)
+    for row in rows.values():
+        runs = row.pop("runs")
+        for key in KEYS:
+            values = [r[key] for r in runs if key in r]
+            row[key] = statistics.median(values) if values else None
+        result.rows.append(row)
+    base = rows["off"]["cpu_us_per_cycle"]
+    for mode in ("thread", "loop"):
+        extra = 100 * (rows[mode]["cpu_us_per_cycle"] / base - 1)
+        rows[mode]["extra_cpu_pct"] = extra
+        result.checks.append(Check(f"extra gateway CPU, server in its {mode}", extra, EXTRA_CPU_TARGET_PCT, "<=",
+                                   " %"))
+        result.checks.append(Check(f"change-to-client p99, server in its {mode}", rows[mode]["client_change_p99_ms"],
+                                   CHANGE_P99_TARGET_MS, "<=", " ms"))
+    result.notes.append("one client (node-opcua, own process, Basic256Sha256 Sign&Encrypt, user+password) "
+                        "subscribed to every variable below every machine's Metrics folder, publishing interval 20 ms")
+    result.notes.append("burst = the client creates 10,000 more monitored items in one request; burst_mqtt_* = "
+                        "change-to-broker latency over that request and the 6 s after it")
+    result.notes.append("change = simulator stamps a macro with its clock -> client receipt (includes up to one "
+                        "poll period); sample = SourceTimestamp (CNC time of the read) -> client receipt")
+    result.notes.append("CPU = user+sys of the daemon process only (the client and simulators are not counted)")
+    return result

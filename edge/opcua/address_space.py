@@ -1,0 +1,236 @@
+"""The machines in the server's address space: built at each birth, updated in place per sample.
+
+A machine's birth (its metric specs and first values) adds its object, the 40501 components, the
+`Metrics` folder and one variable per metric (plus its 40501 mirror, edge.opcua.layout), in one batch
+through the node management service. A sample then replaces the Value attribute of the metric's node(s)
+and calls the attribute's data-change callbacks (the monitored items of subscribed clients), which is
+what asyncua's own write_attribute_value does, without its per-call type check: the value was built
+for the node's type (edge.opcua.values).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+from asyncua import ua
+from asyncua.server.internal_server import InternalServer
+
+from edge.opcua import layout, nodes
+from edge.opcua.values import SharedDataValue, data_value, offline_value, status_code, variant_type
+from edge.samples import MetricSpec, MetricType, Sample
+
+log = logging.getLogger(__name__)
+
+_WAITING = "BadWaitingForInitialData"
+
+
+@dataclass(slots=True)
+class MetricSlot:
+    """Where one metric's value lives: the Value attribute of each node showing it."""
+
+    kind: MetricType
+    node_ids: list[ua.NodeId]
+    attributes: list[Any]  # asyncua AttributeValue (value + datachange_callbacks)
+    writable: bool = False
+
+
+@dataclass
+class MachineNodes:
+    device_id: str
+    object_id: ua.NodeId
+    notifier_id: ua.NodeId
+    slots: dict[str, MetricSlot] = field(default_factory=dict)
+    paths: set[str] = field(default_factory=set)  # paths below the machine object that have a node
+    online: bool = False
+
+
+class GatewaySpace:
+    """Every machine's nodes below Objects/Machines, in the gateway's namespace."""
+
+    def __init__(self, iserver: InternalServer, namespace: int) -> None:
+        self.iserver = iserver
+        self.ns = namespace
+        self.machines: dict[str, MachineNodes] = {}
+        self.folder = ua.NodeId(layout.MACHINES_FOLDER, namespace)
+        # metric node -> (machine, metric): a client's write of any of them goes to the command layer,
+        # which decides (and audits) also for the read-only ones
+        self.by_node: dict[ua.NodeId, tuple[str, str]] = {}
+        self.values_set = 0
+
+    def setup(self) -> None:
+        objects = ua.NodeId(ua.ObjectIds.ObjectsFolder)
+        self._add([nodes.folder(self.folder, layout.MACHINES_FOLDER, objects)])
+
+    # ---- births ------------------------------------------------------------------------------------
+    def machine_online(self, device_id: str, specs: Sequence[MetricSpec], samples: Iterable[Sample],
+                       writable: Callable[[MetricSpec], bool]) -> MachineNodes:
+        """Create (or extend) the machine's nodes for `specs` and show `samples`; metrics no longer in the
+        birth are removed."""
+        machine = self.machines.get(device_id)
+        if machine is None:
+            machine = self._create_machine(device_id)
+        wanted = {spec.name: spec for spec in specs}
+        self._remove(machine, [name for name in machine.slots if name not in wanted])
+        items: list[ua.AddNodesItem] = []
+        now = datetime.now(UTC)
+        waiting = SharedDataValue(ua.Variant(None), StatusCode=status_code(_WAITING), ServerTimestamp=now)
+        for name in sorted(wanted):
+            spec = wanted[name]
+            may_write = writable(spec)
+            slot = machine.slots.get(name)
+            if slot is None:
+                slot = self._create_metric(machine, spec, may_write, items)
+                if slot is not None:
+                    machine.slots[name] = slot
+            elif slot.writable != may_write:
+                slot.writable = may_write
+                self._set_access(slot, may_write)
+        self._add(items)
+        for name, slot in machine.slots.items():
+            if not slot.attributes:  # new: no value until a sample brings one
+                slot.attributes = [self._value_attribute(node_id) for node_id in slot.node_ids]
+                for attribute in slot.attributes:
+                    attribute.value = waiting
+            for node_id in slot.node_ids:
+                self.by_node[node_id] = (device_id, name)
+        machine.online = True
+        return machine
+
+    def _create_machine(self, device_id: str) -> MachineNodes:
+        ns = self.ns
+        object_id = ua.NodeId(device_id, ns)
+        notifier = ua.NodeId(f"{device_id}/{layout.MESSAGES}", ns)
+        machine = MachineNodes(device_id, object_id, notifier)
+        items = [nodes.component(object_id, device_id, self.folder, notifier=True)]
+        items[0].ReferenceTypeId = ua.NodeId(ua.ObjectIds.Organizes)
+        for name in layout.COMPONENTS:
+            items.append(nodes.component(self._id(device_id, name), name, object_id))
+            machine.paths.add(name)
+        items.append(nodes.component(notifier, "Messages", self._id(device_id, "Notification"), notifier=True))
+        machine.paths.add(layout.MESSAGES)
+        items.append(nodes.folder(self._id(device_id, layout.METRICS_FOLDER), layout.METRICS_FOLDER, object_id))
+        machine.paths.add(layout.METRICS_FOLDER)
+        manufacturer = ua.Variant(layout.MANUFACTURER, ua.VariantType.String)
+        items.append(nodes.variable(self._id(device_id, "Identification/Manufacturer"), "Manufacturer",
+                                    self._id(device_id, "Identification"), ua.VariantType.String, manufacturer))
+        self._add(items)
+        self.machines[device_id] = machine
+        return machine
+
+    def _create_metric(self, machine: MachineNodes, spec: MetricSpec, writable: bool,
+                       items: list[ua.AddNodesItem]) -> MetricSlot | None:
+        vtype = variant_type(spec.type)
+        node_ids = []
+        for path, folder in ((layout.metric_path(spec.name), True), (layout.mirror_path(spec.name), False)):
+            if path is None:
+                continue
+            if path in machine.paths:
+                log.warning("metric not shown in OPC UA: its node path is taken machine=%s metric=%s path=%s",
+                            machine.device_id, spec.name, path)
+                continue
+            parent = self._parents(machine, path, folder, items)
+            node_id = self._id(machine.device_id, path)
+            items.append(nodes.variable(node_id, path.rsplit("/", 1)[-1], parent, vtype, ua.Variant(),
+                                        writable=writable, description=spec.description, has_unit=bool(spec.unit)))
+            if spec.unit:
+                items.append(nodes.engineering_units(self._id(machine.device_id, f"{path}#EngineeringUnits"),
+                                                     node_id, spec.unit))
+            machine.paths.add(path)
+            node_ids.append(node_id)
+        if not node_ids:
+            return None
+        return MetricSlot(spec.type, node_ids, [], writable)
+
+    def _parents(self, machine: MachineNodes, path: str, folder: bool, items: list[ua.AddNodesItem]) -> ua.NodeId:
+        """The node id of the parent of `path`, adding the folders (Metrics) or objects (40501) on the way."""
+        parts = path.split("/")
+        for depth in range(1, len(parts)):
+            prefix = "/".join(parts[:depth])
+            if prefix not in machine.paths:
+                parent = self._id(machine.device_id, "/".join(parts[:depth - 1]))
+                make = nodes.folder if folder else nodes.component
+                items.append(make(self._id(machine.device_id, prefix), parts[depth - 1], parent))
+                machine.paths.add(prefix)
+        return self._id(machine.device_id, "/".join(parts[:-1]))
+
+    def _remove(self, machine: MachineNodes, names: list[str]) -> None:
+        if not names:
+            return
+        params = ua.DeleteNodesParameters()
+        for name in names:
+            slot = machine.slots.pop(name)
+            for node_id in slot.node_ids:
+                self.by_node.pop(node_id, None)
+                params.NodesToDelete.append(ua.DeleteNodesItem(NodeId=node_id, DeleteTargetReferences=True))
+                machine.paths.discard(str(node_id.Identifier).split("/", 1)[1])
+        self.iserver.node_mgt_service.delete_nodes(params)
+        log.info("metrics removed from OPC UA machine=%s count=%d", machine.device_id, len(names))
+
+    # ---- values ------------------------------------------------------------------------------------
+    async def update(self, device_id: str, samples: Iterable[Sample]) -> None:
+        """Show the samples' values and tell the monitored items."""
+        machine = self.machines.get(device_id)
+        if machine is None:
+            return
+        slots = machine.slots
+        now = datetime.now(UTC)
+        count = 0
+        for sample in samples:
+            slot = slots.get(sample.name)
+            if slot is None or sample.historical:
+                continue
+            value = data_value(sample, now)
+            for attribute in slot.attributes:
+                attribute.value = value
+                callbacks = attribute.datachange_callbacks
+                if callbacks:
+                    for handle, callback in list(callbacks.items()):
+                        await callback(handle, value)
+            count += 1
+        self.values_set += count
+
+    async def offline(self, device_id: str) -> None:
+        """The machine's CNC session is down: every value Bad (BadNoCommunication), no value."""
+        machine = self.machines.get(device_id)
+        if machine is None:
+            return
+        machine.online = False
+        value = offline_value(datetime.now(UTC))
+        for slot in machine.slots.values():
+            for attribute in slot.attributes:
+                attribute.value = value
+                for handle, callback in list(attribute.datachange_callbacks.items()):
+                    await callback(handle, value)
+
+    def metric_of(self, node_id: ua.NodeId) -> tuple[str, str] | None:
+        """(machine, metric) shown by a node, else None."""
+        return self.by_node.get(node_id)
+
+    def slot(self, device_id: str, metric: str) -> MetricSlot | None:
+        machine = self.machines.get(device_id)
+        return machine.slots.get(metric) if machine is not None else None
+
+    # ---- helpers -----------------------------------------------------------------------------------
+    def _id(self, device_id: str, path: str) -> ua.NodeId:
+        return ua.NodeId(f"{device_id}/{path}" if path else device_id, self.ns)
+
+    def _add(self, items: list[ua.AddNodesItem]) -> None:
+        if not items:
+            return
+        for item, result in zip(items, self.iserver.node_mgt_service.add_nodes(items), strict=True):
+            if not result.StatusCode.is_good():
+                log.warning("OPC UA node not added node=%s status=%s", item.RequestedNewNodeId, result.StatusCode)
+
+    def _value_attribute(self, node_id: ua.NodeId) -> Any:
+        return self.iserver.aspace[node_id].attributes[ua.AttributeIds.Value]
+
+    def _set_access(self, slot: MetricSlot, writable: bool) -> None:
+        level = ua.DataValue(ua.Variant(nodes.READ_WRITE if writable else nodes.READ, ua.VariantType.Byte))
+        for node_id in slot.node_ids:
+            node = self.iserver.aspace[node_id]
+            node.attributes[ua.AttributeIds.AccessLevel].value = level
+            node.attributes[ua.AttributeIds.UserAccessLevel].value = level
