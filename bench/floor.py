@@ -34,6 +34,7 @@ from edge.config import parse_config
 from edge.focas.client import FocasClient
 from edge.focas.frame import PduType
 from edge.samples import MetricSpec, Sample
+from edge.service.settings import machine_settings
 
 PERIOD_S = 0.1
 GRID_S = 0.05
@@ -80,7 +81,7 @@ async def _pollers(ports: list[int], warmup_s: float, duration_s: float) -> dict
                           f"poll_grid_s: {GRID_S}\nmachines:\n{machines_section(ports, PERIOD_S)}", "floor", {})
     grid, sink = TickGrid(config.poll_grid_step_s), DroppingSink()
     with tempfile.TemporaryDirectory(prefix="bench-floor-") as state:
-        pollers = [MachinePoller(m, config.alarms_for(m), sink, Path(state), jitter_s=PERIOD_S, grid=grid)
+        pollers = [MachinePoller(machine_settings(config, m), sink, Path(state), jitter_s=PERIOD_S, grid=grid)
                    for m in config.machines]
         tasks = [asyncio.create_task(poller.run()) for poller in pollers]
         try:

@@ -1,6 +1,11 @@
 """The focas-edge command: one module per subcommand, each with a register(subparsers) function.
 
 Exit codes for every subcommand: 0 all ok, 1 a CNC or network error, 2 bad usage or bad config.
+
+The top layer: cli may import every package below it (service, command, collect, publish, config, sim,
+fwlib, focas); nothing imports cli. Subcommand modules are imported only when their subcommand runs, so
+`focas-edge read` does not load the daemon. The terminal views (watch, the live view, the `make run` demo)
+live in edge/cli/views/.
 """
 
 from __future__ import annotations
@@ -17,6 +22,8 @@ from edge.service.logformat import LOG_FORMATS, configure_logging
 #   register(subparsers) -> None   adding its parser with set_defaults(func=handler)
 # where handler(args) -> int returns the exit code.
 SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config", "fwlib_host"]
+
+__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "SUBCOMMANDS", "build_parser", "main"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1

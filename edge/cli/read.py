@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
 from edge.cli.named_reads import NAMED_READS, Shaper
-from edge.collect.axis_numbers import refused_as_axis_type
+from edge.collect import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
 from edge.focas.model import ParamRecord

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from edge import ConfigError
 from edge.cli import EXIT_USAGE
-from edge.publish.settings import PublishSettings
+from edge.publish import PublishSettings
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 1883
@@ -58,7 +58,7 @@ def watch_plan(args: argparse.Namespace) -> WatchPlan:
     credentials = None
     if args.config is not None:
         from edge.config import load_config
-        from edge.service.daemon import publish_settings
+        from edge.service.settings import publish_settings
 
         credentials = publish_settings(load_config(args.config))
         host, port, prefix = credentials.host, credentials.port, credentials.json_prefix

@@ -33,9 +33,16 @@ from edge.cli.read import (
     plan_read,
     read_batch,
 )
-from edge.command.errors import CommandRefused
-from edge.command.requests import WriteOp, pmc_bytes
-from edge.command.target_io import check_param, expected_macro, param_record, read_item, write_target
+from edge.command import (
+    CommandRefused,
+    WriteOp,
+    check_param,
+    expected_macro,
+    param_record,
+    pmc_bytes,
+    read_item,
+    write_target,
+)
 from edge.focas.errors import FocasError
 from edge.focas.model import PmcType
 from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget, TargetError, WritableTarget, parse_assignment

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from edge.config import MachineConfig
+from edge.collect.settings import MachineSettings
 from edge.focas import items as it
 from edge.focas.errors import EW_ATTRIB, EW_NUMBER, OutOfRange
 from edge.focas.values import ALL_AXES
@@ -23,7 +23,7 @@ AXIS_TYPE_REFUSALS = frozenset({EW_ATTRIB, EW_NUMBER})
 NumberRead = it.ReadParams | it.ReadDiag
 
 
-def axis_zero_reads(machine: MachineConfig) -> list[tuple[str, NumberRead]]:
+def axis_zero_reads(machine: MachineSettings) -> list[tuple[str, NumberRead]]:
     """The configured axis-0 numbers as (metric folder, read)."""
     params = [("Param", it.ReadParams(p.number, p.number, 0)) for p in machine.poll.params if p.axis == 0]
     diags = [("Diag", it.ReadDiag(d.number, d.number, 0)) for d in machine.poll.diags if d.axis == 0]
@@ -43,7 +43,7 @@ def all_axes(read: NumberRead) -> NumberRead:
     return type(read)(read.first, read.last, ALL_AXES)
 
 
-async def per_axis_numbers(session: Any, machine: MachineConfig) -> frozenset[tuple[str, int]]:
+async def per_axis_numbers(session: Any, machine: MachineSettings) -> frozenset[tuple[str, int]]:
     """(folder, number) of every configured axis-0 number to read per axis on this control."""
     reads = axis_zero_reads(machine)
     if not reads:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 
-from edge.config import MachineConfig
+from edge.collect.settings import MachineSettings
 from edge.focas.errors import EW_PATH, CncError
 from edge.focas.paths import path_count
 from edge.focas.session import CncSession
@@ -25,7 +25,7 @@ PATH_COUNT = MetricSpec("Device/Paths", MetricType.INT32,
 class PathCheck:
     """Asks a machine's path count and compares it with the config; says each mismatch once per run."""
 
-    def __init__(self, machine: MachineConfig) -> None:
+    def __init__(self, machine: MachineSettings) -> None:
         self.machine = machine
         self._said: int | None = None  # the count last warned about
 
@@ -47,12 +47,12 @@ class PathCheck:
                         "to publish paths %d..%d", self.machine.id, count, configured, count, self.machine.id,
                         configured + 1, count)
         else:
-            offline = ", ".join(d.id for d in self.machine.path_devices()[count:])
+            offline = ", ".join(self.machine.path_devices[count:])
             log.warning("machine=%s the control has %d path(s), %d configured (`paths: %d`): %s stay(s) "
                         "offline; set `paths: %d`", self.machine.id, count, configured, configured, offline, count)
 
 
-def connect_error(machine: MachineConfig, error: BaseException | None) -> str:
+def connect_error(machine: MachineSettings, error: BaseException | None) -> str:
     """Why a connect failed: the error, and for a path the control lacks which config key to change."""
     if isinstance(error, CncError) and error.code == EW_PATH and machine.path != 1:
         return (f"path {machine.path} is not on this control ({error}); the machine's `paths:` names more "

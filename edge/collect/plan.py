@@ -7,7 +7,7 @@ request, and turns each result into values with `metric_values`.
 Metric names use Sparkplug folders: `Status/Run`, `Program/Number`, `Spindle/1/Speed`,
 `Axis/X/Absolute`, `Macro/500`, `PMC/D2204`, `Alarm/Active`, `Counters/Parts`, `Clock/Skew` ...
 Axis and spindle names are only known after the static reads, so the full plan is built per session
-with `MachinePlan.build(machine, alarms, static)`.
+with `MachinePlan.build(poll, static)` from the machine's poll settings (edge.collect.settings).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from edge.config import AlarmsConfig, MachineConfig
+from edge.collect.settings import PollSettings
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
 from edge.focas.values import ALL_AXES
@@ -151,26 +151,23 @@ class MachinePlan:
     periods: dict[Group, float] = field(default_factory=dict)
 
     @classmethod
-    def build(cls, machine: MachineConfig, alarms: AlarmsConfig,
-              static: StaticInfo | None = None) -> MachinePlan:
+    def build(cls, poll: PollSettings, static: StaticInfo | None = None) -> MachinePlan:
         static = static or StaticInfo()
-        poll = machine.poll
         reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
-        reads += (_program_reads(machine) + _load_reads(machine, static) + _counter_reads(machine)
-                  + _work_offset_reads(machine, static) + _library_reads(machine))
+        reads += (_program_reads(poll) + _load_reads(poll, static) + _counter_reads(poll)
+                  + _work_offset_reads(poll, static) + _library_reads(poll))
         reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
-        reads += _macro_reads(machine)
-        reads += _pmc_reads(machine)
-        reads += _numbered_reads(machine, static)
-        if alarms.mode == "ActivePlusHistory":
-            reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(alarms.history_depth),
+        reads += _macro_reads(poll)
+        reads += _pmc_reads(poll)
+        reads += _numbered_reads(poll, static)
+        if poll.alarm_history:
+            reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(poll.alarm_history_depth),
                                      (ALARM_HISTORY,)))
-        periods = {Group.STATUS: poll.periods.status, Group.ACTIVE_ALARMS: poll.periods.status,
-                   Group.MACROS: poll.periods.macros, Group.PMC: poll.periods.pmc,
-                   Group.PARAMS: poll.periods.params, Group.DIAGS: poll.periods.diags,
-                   Group.LOADS: poll.periods.loads, Group.COUNTERS: poll.periods.counters,
-                   Group.ALARM_HISTORY: alarms.history_interval}
-        return cls(tuple(reads), periods)
+        periods = poll.periods
+        return cls(tuple(reads), {
+            Group.STATUS: periods.status, Group.ACTIVE_ALARMS: periods.status, Group.MACROS: periods.macros,
+            Group.PMC: periods.pmc, Group.PARAMS: periods.params, Group.DIAGS: periods.diags,
+            Group.LOADS: periods.loads, Group.COUNTERS: periods.counters, Group.ALARM_HISTORY: periods.alarm_history})
 
     def reads_for(self, groups: Iterable[Group]) -> list[PlannedRead]:
         """The reads of `groups`, in plan order (the poller adds ReadClock to every batch)."""
@@ -246,26 +243,25 @@ def _status_reads(positions: Sequence[str], part_count: bool, static: StaticInfo
     return reads
 
 
-def _program_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _program_reads(poll: PollSettings) -> list[PlannedRead]:
     reads = []
-    if machine.poll.program_name:
+    if poll.program_name:
         reads += [PlannedRead(Group.STATUS, it.ReadExecProgramName(), (PROGRAM_NAME,)),
                   PlannedRead(Group.STATUS, it.ReadMainProgramPath(), (PROGRAM_MAIN_PATH,))]
-    if machine.poll.operator_messages:
+    if poll.operator_messages:
         reads.append(PlannedRead(Group.STATUS, it.ReadOperatorMessages(), (OPERATOR_MESSAGE,)))
     return reads
 
 
-def _load_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
-    if not machine.poll.servo_load or not static.axis_names:
+def _load_reads(poll: PollSettings, static: StaticInfo) -> list[PlannedRead]:
+    if not poll.servo_load or not static.axis_names:
         return []
     specs = tuple(MetricSpec(f"Axis/{axis}/Load", MetricType.DOUBLE, "%", description="servo load meter")
                   for axis in static.axis_names)
     return [PlannedRead(Group.LOADS, it.ReadServoMeter(), specs)]
 
 
-def _counter_reads(machine: MachineConfig) -> list[PlannedRead]:
-    poll = machine.poll
+def _counter_reads(poll: PollSettings) -> list[PlannedRead]:
     reads = []
     if poll.timers:
         reads += [PlannedRead(Group.COUNTERS, it.ReadTimer(kind), (spec,)) for kind, spec in enumerate(TIMER_METRICS)]
@@ -284,20 +280,20 @@ MODAL_G = MetricSpec("Modal/G", MetricType.STRING,
 TOOL_NUMBER = MetricSpec("Tool/Number", MetricType.INT32, description="T code in use (FOCAS library)")
 
 
-def _library_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _library_reads(poll: PollSettings) -> list[PlannedRead]:
     """Opt-in reads only the FOCAS library host serves (no public native wire form), at the counters period."""
     reads = []
-    if machine.poll.modal:
+    if poll.modal:
         reads.append(PlannedRead(Group.COUNTERS, it.ReadModalGCodes(), (MODAL_G,)))
-    if machine.poll.tool_number:
+    if poll.tool_number:
         reads.append(PlannedRead(Group.COUNTERS, it.ReadToolNumber(), (TOOL_NUMBER,)))
     return reads
 
 
-def _work_offset_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+def _work_offset_reads(poll: PollSettings, static: StaticInfo) -> list[PlannedRead]:
     """WorkOffset/G5x/<axis> per configured G code, one value per axis, at the counters period."""
     reads: list[PlannedRead] = []
-    for g_code in machine.poll.work_offsets if static.axis_names else ():
+    for g_code in poll.work_offsets if static.axis_names else ():
         specs = tuple(MetricSpec(f"WorkOffset/G{g_code}/{axis}", MetricType.DOUBLE, axis_unit(axis),
                                  description="work-coordinate offset (FOCAS library)")
                       for axis in static.axis_names)
@@ -310,36 +306,35 @@ def axis_unit(axis_name: str) -> str:
     return "deg" if axis_name[:1].upper() in ROTARY_AXES else "mm"
 
 
-def _macro_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _macro_reads(poll: PollSettings) -> list[PlannedRead]:
     reads = []
-    for macro in machine.poll.macros:
-        numbers = macro.numbers
-        specs = tuple(MetricSpec(macro.metric_name(n), MetricType.DOUBLE, writable=True) for n in numbers)
-        reads.append(PlannedRead(Group.MACROS, it.ReadMacros(numbers.start, numbers.stop - 1), specs,
+    for macro in poll.macros:
+        specs = tuple(MetricSpec(name, MetricType.DOUBLE, writable=True) for name in macro.names)
+        reads.append(PlannedRead(Group.MACROS, it.ReadMacros(macro.first, macro.last), specs,
                                  (macro.deadband,) * len(specs)))
     return reads
 
 
-def _pmc_reads(machine: MachineConfig) -> list[PlannedRead]:
+def _pmc_reads(poll: PollSettings) -> list[PlannedRead]:
     reads = []
-    for pmc in machine.poll.pmc:
+    for pmc in poll.pmc:
         target = pmc.target
         kind = MetricType.BOOLEAN if pmc.bits else PMC_METRIC_TYPES[target.data_type]
-        specs = tuple(MetricSpec(name, kind, writable=True) for name in pmc.metric_names())
+        specs = tuple(MetricSpec(name, kind, writable=True) for name in pmc.names)
         item = it.ReadPmc(target.area, target.start, target.end, target.data_type)
         reads.append(PlannedRead(Group.PMC, item, specs, (pmc.deadband,) * len(specs), bits=pmc.bits))
     return reads
 
 
-def _numbered_reads(machine: MachineConfig, static: StaticInfo) -> list[PlannedRead]:
+def _numbered_reads(poll: PollSettings, static: StaticInfo) -> list[PlannedRead]:
     """Parameters and diagnoses; an all-axes one (`axis: all`, or an axis-0 number the control answered
     as axis-type) is one read publishing `<name>/<axis name>` per controlled axis."""
     reads = []
-    kinds = (("Param", Group.PARAMS, it.ReadParams, machine.poll.params, True),
-             ("Diag", Group.DIAGS, it.ReadDiag, machine.poll.diags, False))
+    kinds = (("Param", Group.PARAMS, it.ReadParams, poll.params, True),
+             ("Diag", Group.DIAGS, it.ReadDiag, poll.diags, False))
     for folder, group, make, entries, writable in kinds:
         for entry in entries:
-            name = entry.metric_name(folder)
+            name = entry.name
             axis = entry.axis
             if axis == 0 and (folder, entry.number) in static.per_axis:
                 axis = ALL_AXES

@@ -6,23 +6,22 @@ only marks its own metrics bad; a function the control does not have (EW_FUNC/EW
 from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and at
 every reconnect, since one transient answer must not end a data stream. A broken session ends in
 device_offline, backoff, and a fresh birth with the full state on recovery.
+
+What a tick sends, prepared once per plan, is edge.collect.tick_batch; the counters are edge.collect.stats.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import enum
 import json
 import logging
 import math
-import operator
 import random
 import time
-from bisect import bisect_left
 from collections.abc import Callable, Sequence
 from collections.abc import Set as AbstractSet
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import datetime
 from itertools import compress
 from operator import is_not
@@ -37,8 +36,10 @@ from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
 from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
+from edge.collect.settings import MachineSettings
+from edge.collect.stats import PollerStats
+from edge.collect.tick_batch import ReadKind, TickBatch
 from edge.collect.tickgrid import TickGrid
-from edge.config import AlarmsConfig, MachineConfig
 from edge.focas import items as it
 from edge.focas.connect import open_session
 from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
@@ -65,37 +66,6 @@ class DeviceSink(Protocol):
     async def device_offline(self, device_id: str) -> None: ...
 
 
-# Poll cycle wall time buckets (seconds): a LAN round trip is ~1-20 ms, a slow control 100 ms+.
-CYCLE_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0)
-
-
-@dataclass
-class PollerStats:
-    """Counters the daemon publishes as node metrics and on /metrics."""
-
-    ticks: int = 0
-    status_reads: int = 0  # ticks that read the status group (the status page's achieved poll rate)
-    overruns: int = 0
-    skipped: int = 0
-    connects: int = 0
-    disconnects: int = 0
-    item_errors: dict[str, int] = field(default_factory=dict)  # by EW name or error class
-    last_cycle_s: float = 0.0
-    # Cycle wall times as a histogram (counts per CYCLE_BUCKETS bound, then over the last): constant memory
-    # per machine, and nothing lost between two scrapes of /metrics.
-    cycle_buckets: list[int] = field(default_factory=lambda: [0] * (len(CYCLE_BUCKETS) + 1))
-    cycle_total_s: float = 0.0
-
-    def count_error(self, error: FocasError) -> None:
-        key = getattr(error, "name", None) or type(error).__name__
-        self.item_errors[key] = self.item_errors.get(key, 0) + 1
-
-    def record_cycle(self, seconds: float) -> None:
-        self.last_cycle_s = seconds
-        self.cycle_buckets[bisect_left(CYCLE_BUCKETS, seconds)] += 1  # first bound >= seconds: "le"
-        self.cycle_total_s += seconds
-
-
 @dataclass
 class TickResult:
     samples: list[Sample]
@@ -103,58 +73,14 @@ class TickResult:
     history: list[AlarmHistoryEntry]  # new alarm-history entries, oldest first
 
 
-class ReadKind(enum.Enum):
-    """What a tick does with a read's result beyond publishing its values."""
-
-    VALUES = "values"
-    ALARM_STATUS = "alarm_status"  # also decides whether the active alarms are read
-    ALARM_HISTORY = "alarm_history"  # published as events, not values
-
-
 _NOT_IN_TICK = frozenset({pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})  # read on change / once per session
 _NOTHING = object()  # no previous result (compares unequal to any result)
 
 
-@dataclass(frozen=True, slots=True)
-class TickBatch:
-    """One combination of due groups, prepared once per plan: the reads, the request items (the clock
-    last; a stable tuple, so the client reuses its encoded request), per read its kind and extractor, and
-    where each read keeps its last result in the poller's per-plan list (`previous` fetches them all)."""
-
-    reads: tuple[pl.PlannedRead, ...]
-    items: tuple[it.ReadItem, ...]
-    kinds: tuple[ReadKind, ...]
-    extractors: tuple[pl.ValueExtractor, ...]
-    positions: tuple[int, ...]  # per read, its index in the plan's reads
-    previous: Callable[[list[object]], tuple[object, ...]]  # the per-plan list -> this batch's entries
-    indices: range  # 0..len(reads)-1
-
-    @classmethod
-    def build(cls, reads: Sequence[pl.PlannedRead],
-              extractor: Callable[[pl.PlannedRead], pl.ValueExtractor] = pl.value_extractor,
-              positions: Sequence[int] | None = None) -> TickBatch:
-        kinds = tuple(ReadKind.ALARM_STATUS if isinstance(r.item, it.ReadAlarmStatus)
-                      else ReadKind.ALARM_HISTORY if isinstance(r.item, it.ReadAlarmHistory)
-                      else ReadKind.VALUES for r in reads)
-        where = tuple(range(len(reads)) if positions is None else positions)
-        if len(where) != len(reads):
-            raise ValueError(f"{len(where)} positions for {len(reads)} reads")
-        previous: Callable[[list[object]], tuple[object, ...]]
-        if len(where) == 1:  # itemgetter of one index returns the item, not a 1-tuple
-            (only,) = where
-            previous = lambda last: (last[only],)  # noqa: E731
-        elif where:
-            previous = operator.itemgetter(*where)
-        else:
-            previous = lambda last: ()  # noqa: E731
-        return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
-                   tuple(extractor(r) for r in reads), where, previous, range(len(reads)))
+SessionFactory = Callable[[MachineSettings], CncSession]
 
 
-SessionFactory = Callable[[MachineConfig], CncSession]
-
-
-def default_session(machine: MachineConfig) -> CncSession:
+def default_session(machine: MachineSettings) -> CncSession:
     timeouts = machine.timeouts
     extra: dict[str, Any] = {} if machine.max_subpackets is None else {"max_subpackets": machine.max_subpackets}
     if machine.path != 1:
@@ -167,11 +93,10 @@ def default_session(machine: MachineConfig) -> CncSession:
 class MachinePoller:
     """Owns one machine's session and polling task; `run()` until cancelled, `close()` after."""
 
-    def __init__(self, machine: MachineConfig, alarms: AlarmsConfig, sink: DeviceSink, state_dir: Path,
+    def __init__(self, machine: MachineSettings, sink: DeviceSink, state_dir: Path,
                  session_factory: SessionFactory = default_session, jitter_s: float = 1.0,
                  grid: TickGrid | None = None) -> None:
         self.machine = machine
-        self.alarms_config = alarms
         self.sink = sink
         self.session = session_factory(machine)
         self.stats = PollerStats()
@@ -298,7 +223,7 @@ class MachinePoller:
     async def _poll_session(self) -> None:
         static = await self._read_static()
         paths = await self._paths.count(self.session)
-        plan = pl.MachinePlan.build(self.machine, self.alarms_config, static)
+        plan = pl.MachinePlan.build(self.machine.poll, static)
         for operation in self._unsupported(plan):
             plan = plan.without(operation)
         self._full_plan = self._plan = plan

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from edge.collect.plan import MachinePlan, PlannedRead
+from edge.collect import MachinePlan, PlannedRead
 from edge.command.requests import WriteOp
 from edge.focas import items as it
 from edge.focas.targets import ALL_AXES, MacroTarget, ParamTarget, PmcTarget, WritableTarget

@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from edge.collect.plan import metric_values
+from edge.collect import metric_values
 from edge.command import target_io
 from edge.command.dcmd import reads_touching
 from edge.command.errors import CommandRefused, ErrorCode, code_for, refused_by_cnc
@@ -34,7 +34,7 @@ from edge.focas.targets import MacroTarget, ParamTarget
 from edge.samples import Sample
 
 if TYPE_CHECKING:
-    from edge.collect.poller import MachinePoller
+    from edge.collect import MachinePoller
 
 log = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ from collections.abc import Callable
 
 from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.requests import WriteOp
+from edge.command.settings import AllowRule, RateLimit, WritePolicy
 from edge.command.signedness import PMC_READINGS, Reading
-from edge.config import AllowRule, RateLimit, WritePolicy
 from edge.focas.targets import PmcTarget
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from itertools import groupby
 from typing import TYPE_CHECKING
 
-from edge.collect.plan import MachinePlan
+from edge.collect import MachinePlan, MachineSettings
 from edge.command.audit import AuditLog, AuditRecord, utc_now
 from edge.command.dcmd import merge_adjacent, metric_target
 from edge.command.errors import CommandRefused, ErrorCode
@@ -25,16 +25,16 @@ from edge.command.limits import check_limits
 from edge.command.policy import RateLimiter, authorise
 from edge.command.requests import RequestItem, WriteOp, make_op, parse_request
 from edge.command.results import WriteResult, reply, request_error
-from edge.config import Config, MachineConfig, WritePolicy
+from edge.command.settings import CommandSettings, WritePolicy
 from edge.focas.model import SysInfo
 
 if TYPE_CHECKING:
-    from edge.collect.poller import MachinePoller
-    from edge.publish.publisher import CommandSource, Publisher
+    from edge.collect import MachinePoller
+    from edge.publish import CommandSource, Publisher
 
 log = logging.getLogger(__name__)
 
-Routed = tuple[MachineConfig, WriteOp]  # a write and the device (path) whose session carries it out
+Routed = tuple[MachineSettings, WriteOp]  # a write and the device (path) whose session carries it out
 
 
 @dataclass
@@ -50,11 +50,11 @@ class _DcmdBatch:
 class CommandService:
     """Validates, authorises, audits, queues and answers writes; one instance per daemon."""
 
-    def __init__(self, config: Config, publisher: Publisher, pollers: Mapping[str, MachinePoller]) -> None:
-        self.config = config
+    def __init__(self, settings: CommandSettings, publisher: Publisher, pollers: Mapping[str, MachinePoller]) -> None:
+        self.settings = settings
         self.publisher = publisher
         self.pollers = pollers
-        self.audit = AuditLog(config.resolved_state_dir)
+        self.audit = AuditLog(settings.state_dir)
         self._rate = RateLimiter()
         self._queues: dict[str, MachineWriteQueue] = {}
         self._dcmd: dict[tuple[str, str], _DcmdBatch] = {}
@@ -68,8 +68,8 @@ class CommandService:
         out.update(self._counters)
         return out
 
-    def reconfigure(self, config: Config) -> None:
-        self.config = config
+    def reconfigure(self, settings: CommandSettings) -> None:
+        self.settings = settings
 
     async def close(self) -> None:
         """Stop accepting commands; queued writes fail with shutting_down, the one in flight is cancelled."""
@@ -84,7 +84,7 @@ class CommandService:
         self._counters["requests"] += 1
         machine = self._machine(device_id)
         try:
-            parsed = parse_request(payload, self.config.writes.max_payload_bytes)
+            parsed = parse_request(payload, self.settings.max_payload_bytes)
         except CommandRefused as refusal:
             self._record(device_id, source, None, WriteResult.refused(None, refusal))
             await self.publisher.publish_json_reply(device_id, request_error(refusal.code, refusal.message), source)
@@ -165,7 +165,7 @@ class CommandService:
                      for i, op in enumerate(merge_adjacent(ops))]
         await self._run(machine, items, batch.source)
 
-    def _dcmd_op(self, machine: MachineConfig | None, device_id: str, name: str, value: object) -> WriteOp:
+    def _dcmd_op(self, machine: MachineSettings | None, device_id: str, name: str, value: object) -> WriteOp:
         if machine is None:
             raise CommandRefused(ErrorCode.UNKNOWN_MACHINE, f"no machine {device_id!r} is configured")
         target = metric_target(self._plan(machine), name)
@@ -177,17 +177,17 @@ class CommandService:
         except ValueError as exc:  # PydanticCustomError is a ValueError
             raise CommandRefused(ErrorCode.WRONG_TYPE, f"metric {name!r}: {exc}") from None
 
-    def _plan(self, machine: MachineConfig) -> MachinePlan:
+    def _plan(self, machine: MachineSettings) -> MachinePlan:
         poller = self.pollers.get(machine.id)
         if poller is not None and poller.plan is not None:
             return poller.plan
-        return MachinePlan.build(machine, self.config.alarms_for(machine))
+        return MachinePlan.build(machine.poll)
 
     # ---- shared steps --------------------------------------------------------------------------------
-    async def _run(self, machine: MachineConfig, items: Sequence[RequestItem],
+    async def _run(self, machine: MachineSettings, items: Sequence[RequestItem],
                    source: CommandSource) -> list[WriteResult]:
         """Check every item; if all pass, admit (rate limit) and queue them; audit and count each."""
-        policy = self.config.write_policy(machine)
+        policy = self.settings.policies[machine.id]
         checked = self._check(machine, policy, items)
         if isinstance(checked, tuple):
             results = await self._queue_and_wait(machine, policy, list(checked))
@@ -197,7 +197,7 @@ class CommandService:
             self._record(machine.id, source, item, result)
         return results
 
-    def _check(self, machine: MachineConfig, policy: WritePolicy,
+    def _check(self, machine: MachineSettings, policy: WritePolicy,
                items: Sequence[RequestItem]) -> tuple[Routed, ...] | list[WriteResult]:
         """The ops to write, each with the device whose session writes its path (and marked whether a bound
         applied), if every item may be written; else a result per item (the first refusal, the rest skipped)."""
@@ -219,20 +219,18 @@ class CommandService:
                         for n, i in enumerate(items)]
         return tuple(ops)
 
-    def _path_device(self, machine: MachineConfig, path: int | None) -> MachineConfig:
+    def _path_device(self, machine: MachineSettings, path: int | None) -> MachineSettings:
         """The device whose session reads and writes `path` of the control behind `machine` (path 1 is the
         machine's own device, path n its `<id>-path<n>`); unknown_path beyond the configured paths."""
         if path is None or path == machine.path:
             return machine
-        parent = next((m for m in self.config.machines if any(d.id == machine.id for d in m.path_devices())),
-                      machine)
-        devices = parent.path_devices()
+        devices = machine.path_devices
         if path > len(devices):
-            raise CommandRefused(ErrorCode.UNKNOWN_PATH, f"path {path}: machine {parent.id!r} is configured with "
-                                 f"{parent.paths} path(s) (`paths: {parent.paths}`); nothing was written")
-        return devices[path - 1]
+            raise CommandRefused(ErrorCode.UNKNOWN_PATH, f"path {path}: machine {devices[0]!r} is configured with "
+                                 f"{machine.paths} path(s) (`paths: {machine.paths}`); nothing was written")
+        return self.settings.machines[devices[path - 1]]
 
-    async def _queue_and_wait(self, machine: MachineConfig, policy: WritePolicy,
+    async def _queue_and_wait(self, machine: MachineSettings, policy: WritePolicy,
                               routed: list[Routed]) -> list[WriteResult]:
         """Admit the request, then run it in order: consecutive writes to one path as one job on that path's
         queue; after a failure the rest is skipped."""
@@ -262,8 +260,8 @@ class CommandService:
         queue = self._queues.get(machine_id)
         if queue is None:
             def deadline() -> float:
-                machine = self._machine(machine_id)
-                return self.config.write_policy(machine).reconnect_deadline_s if machine else 0.0
+                policy = self.settings.policies.get(machine_id)
+                return policy.reconnect_deadline_s if policy is not None else 0.0
 
             queue = self._queues[machine_id] = MachineWriteQueue(machine_id, self.pollers, deadline)
         return queue
@@ -286,11 +284,8 @@ class CommandService:
             old=result.old, new=result.read_back, outcome=result.outcome,
             message=result.note if result.ok else result.message))
 
-    def _machine(self, machine_id: str) -> MachineConfig | None:
-        try:
-            return self.config.machine(machine_id)
-        except KeyError:
-            return None
+    def _machine(self, machine_id: str) -> MachineSettings | None:
+        return self.settings.machines.get(machine_id)
 
     def _sysinfo(self, machine_id: str) -> SysInfo | None:
         poller = self.pollers.get(machine_id)

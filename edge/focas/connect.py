@@ -82,7 +82,7 @@ def open_session(transport: str, address: str, *, fwlib_host: str | None = None,
             raise ConfigError([f"address {address!r}: the focas transport speaks TCP only"])
         return FocasClient(parsed.host, parsed.port, **kw)
     if transport == "packed":
-        module = importlib.import_module("edge.focas.packed_client")
+        module = importlib.import_module("edge.focas.packed.client")
         packed_client: Any = module.PackedClient
         session: CncSession = packed_client(address, **kw)
         return session

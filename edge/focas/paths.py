@@ -7,9 +7,13 @@ paths 1..MAX_PATHS in one request and the paths before the first refused one are
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from edge.focas import items as it
 from edge.focas.errors import FocasError
-from edge.focas.session import CncSession
+
+if TYPE_CHECKING:  # a type only: targets (sans-IO) imports MAX_PATHS and must not pull in the asyncio session
+    from edge.focas.session import CncSession
 
 MAX_PATHS = 10  # the most paths a 30i-B series control offers
 

@@ -27,7 +27,7 @@ from edge.focas import packed as pk
 from edge.focas.errors import EW_ATTRIB, EW_BUSY, EW_FUNC, EW_LENGTH, EW_NOOPT, EW_OK, CncError, ProtocolError
 from edge.focas.functions import PMC_ADR_TYPES
 from edge.focas.model import ActiveAlarm, ModalGCode, ParamRecord, ParamType, PmcType, SysInfo
-from edge.focas.packed_endpoint import error_answer, error_status
+from edge.focas.packed.endpoint import error_answer, error_status
 from edge.fwlib import structs as st
 from edge.fwlib.library import FocasLibrary
 

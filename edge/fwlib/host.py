@@ -1,7 +1,7 @@
 """The FOCAS library host: the packed surface, served for each CNC through FANUC's library.
 
 One process, one loaded library, one worker (thread + handle) and one packed endpoint per CNC. The
-endpoint is the same listener the simulator uses (edge.focas.packed_endpoint), so the daemon's
+endpoint is the same listener the simulator uses (edge.focas.packed.endpoint), so the daemon's
 `transport: packed` cannot tell the two apart except by what is behind them.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 
-from edge.focas.packed_endpoint import PackedEndpoint, start_packed_endpoint
+from edge.focas.packed.endpoint import PackedEndpoint, start_packed_endpoint
 from edge.fwlib.library import FocasLibrary, LibraryLoadError
 from edge.fwlib.settings import HostSettings
 from edge.fwlib.worker import HandleWorker

@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from edge import ConfigError
 from edge.focas.connect import Address, parse_address
 from edge.focas.model import ParamType
-from edge.focas.packed_client import PackedAddress, parse_packed_address
+from edge.focas.packed.client import PackedAddress, parse_packed_address
 from edge.fwlib.worker import CncTarget, WorkerTimeouts
 
 ParamTypeName = Literal["bit", "byte", "word", "two_word", "real"]

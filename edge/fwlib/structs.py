@@ -9,7 +9,7 @@ The ABI follows the platform's C compiler, as the vendor library was built with 
 - ``long`` is ``ctypes.c_long``: 8 bytes on x86-64 Linux, 4 on 32-bit ARM, x86 and Windows. So IODBPSD's
   union starts at offset 8 on x86-64 Linux (aligned for its ``long`` members) and at 4 elsewhere.
 
-tests/fwlib/standin.c declares the same structs in C, and tests/unit/test_fwlib_layout.py compares sizeof
+tests/fwlib/standin.c declares the same structs in C, and tests/unit/fwlib/test_structs.py compares sizeof
 and every field offset the C compiler reports with these, so a slip on either side cannot hide.
 """
 

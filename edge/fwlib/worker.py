@@ -27,7 +27,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 
 from edge.focas.errors import EW_SOCKET, EW_UNEXP
 from edge.focas.model import ParamType
-from edge.focas.packed_endpoint import error_answer
+from edge.focas.packed.endpoint import error_answer
 from edge.fwlib.calls import LibraryCnc, answer
 from edge.fwlib.library import FocasLibrary
 

@@ -3,7 +3,7 @@
 DATA messages are the hot path: every changed value of every machine goes through one. Building them
 with the protobuf runtime costs about a microsecond per metric in object creation; here a metric is a
 few byte concatenations from precomputed pieces (the alias field per metric, the timestamp field once per
-distinct timestamp, the three Quality property blocks). tests/unit/test_ddata.py checks the output against
+distinct timestamp, the three Quality property blocks). tests/unit/publish/test_ddata.py checks the output against
 `SerializeToString()` byte for byte.
 
 Values the fast writers do not take exactly (an int for a Double metric, a float32 overflow, a bool for

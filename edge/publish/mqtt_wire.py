@@ -3,7 +3,7 @@
 Why: Sparkplug DATA is nearly all of a gateway's traffic, and paho's publish costs about 7 us per message
 (a message-info object with its lock, logging hooks, one send() each). A QoS 0 PUBLISH is just a fixed
 header, the topic and the payload, so edge.publish.mqtt builds it and hands a loop turn's worth to paho's
-write queue as one raw packet. tests/unit/test_mqtt_wire.py checks the bytes against paho's own.
+write queue as one raw packet. tests/unit/publish/test_mqtt_wire.py checks the bytes against paho's own.
 
 Layout: first byte 0x30 | retain; remaining length (base-128, at most 4 bytes); topic length (u16 BE);
 topic (UTF-8); MQTT 5 only: property length 0; payload. No packet identifier at QoS 0.
@@ -24,7 +24,7 @@ _PUBLISH = 0x30
 _RETAIN = 0x01
 # paho's write queue takes raw packets; command 0 means "no callbacks when written" (not a PUBLISH, not
 # a DISCONNECT). This is private API: pyproject.toml pins paho-mqtt to the minor versions it was checked
-# against, tests/unit/test_mqtt_wire.py fails when its shape changes, and a paho without it turns the fast
+# against, tests/unit/publish/test_mqtt_wire.py fails when its shape changes, and a paho without it turns the fast
 # path off with a WARNING (edge.publish.mqtt) rather than failing at the first publish.
 PAHO_VERSION: str = paho_package.__version__
 PRIVATE_QUEUE_PARAMETERS = ("self", "command", "packet", "mid", "qos", "info")

@@ -1,1 +1,28 @@
-"""The running daemon and its surroundings: wiring, reload, sd_notify, the status HTTP endpoint and page, logging."""
+"""The running daemon and its surroundings.
+
+What lives here:
+
+    daemon        the collector daemon: one publisher, a poller per machine, signals, reload, the watchdog
+    state_lock    one daemon per state_dir: the flock the daemon holds and check-config asks about
+    settings      the one place that turns the pydantic config into the settings dataclasses of the
+                  layers below (PublishSettings, MachineSettings, PollSettings, CommandSettings)
+    daemon_view   the read-only view of a running daemon that the status endpoint and the live view share
+    status_http   /healthz, /metrics (Prometheus), /status.json and the status page
+    status_page   status.json's document and the page rendered from it
+    sdnotify      READY/RELOADING/STOPPING/WATCHDOG/STATUS to systemd
+    gc_tuning     the garbage collector's settings for a long-running daemon
+    logformat     text or JSON log lines (every subcommand uses it)
+
+Rules:
+
+1. service may import every layer below it (command, collect, publish, config, focas, the root types);
+   only edge/cli imports service.
+2. Only ``settings`` (and the daemon's reload comparison) read the pydantic config models; collect and
+   command receive dataclasses.
+3. This ``__init__`` imports nothing: every subcommand imports ``logformat`` at start, and loading the
+   daemon's whole dependency tree for ``focas-edge read`` would cost every command its start-up time.
+   Import each module by its path.
+"""
+
+__all__ = ["daemon", "daemon_view", "gc_tuning", "logformat", "sdnotify", "settings", "state_lock", "status_http",
+           "status_page"]

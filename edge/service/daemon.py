@@ -17,56 +17,22 @@ from collections.abc import Callable
 from pathlib import Path
 
 from edge import ConfigError, __version__
-from edge.collect.poller import MachinePoller, SessionFactory, default_session
-from edge.collect.tickgrid import TickGrid
-from edge.command.service import CommandService
+from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
+from edge.command import CommandService
 from edge.config import Config, MachineConfig, load_config
 from edge.config.http_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
-from edge.publish.publisher import Publisher
-from edge.publish.settings import PublishSettings
-from edge.publish.spool import open_spool
+from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
 from edge.service.gc_tuning import tune_collector
 from edge.service.sdnotify import SystemdNotifier
+from edge.service.settings import command_settings, machine_settings, publish_settings
 from edge.service.state_lock import StateDirLock
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
 
 NODE_METRICS_PERIOD_S = 5.0
-
-
-def publish_settings(config: Config) -> PublishSettings:
-    """The publisher's view of the config (secrets read here, at start, never logged)."""
-    mqtt = config.mqtt
-    tls = mqtt.tls
-    spb = mqtt.sparkplug
-    settings = PublishSettings(
-        host=mqtt.host,
-        port=mqtt.effective_port,
-        tls=tls is not None,
-        tls_ca_file=tls.ca_file if tls else None,
-        tls_cert_file=tls.cert_file if tls else None,
-        tls_key_file=tls.key_file if tls else None,
-        tls_insecure=tls.insecure_skip_verify if tls else False,
-        username=mqtt.username,
-        password=mqtt.read_password(),
-        protocol=mqtt.protocol,
-        keepalive=mqtt.keepalive,
-        formats=frozenset(mqtt.formats),
-        json_prefix=mqtt.json_topics.prefix,
-        state_dir=config.resolved_state_dir,
-    )
-    if mqtt.client_id:
-        settings.client_id = mqtt.client_id
-    elif spb is not None:
-        settings.client_id = f"focas-edge-{spb.group_id}-{spb.edge_node_id}"
-    if spb is not None:
-        settings.group_id = spb.group_id
-        settings.edge_node_id = spb.edge_node_id
-        settings.primary_host_id = spb.primary_host_id
-    return settings
 
 
 class Daemon:
@@ -89,7 +55,7 @@ class Daemon:
         self.publisher = Publisher(settings, spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
-        self.commands = CommandService(config, self.publisher, self.pollers)
+        self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.on_device_command_refused = self.commands.on_device_command_refused
@@ -204,7 +170,7 @@ class Daemon:
 
     # ---- machines ------------------------------------------------------------------------------------
     def _start_machine(self, machine: MachineConfig) -> None:
-        poller = MachinePoller(machine, self.config.alarms_for(machine), self.publisher, self.state_dir,
+        poller = MachinePoller(machine_settings(self.config, machine), self.publisher, self.state_dir,
                                self.session_factory, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
@@ -255,7 +221,7 @@ class Daemon:
         removed = [i for i in old if i not in fresh]
         added = [i for i in fresh if i not in old]
         self.config = new
-        self.commands.reconfigure(new)
+        self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
         for machine_id in changed + added:
@@ -328,7 +294,7 @@ async def cancel_and_wait(tasks: list[asyncio.Task[None]]) -> None:
             task.cancel()
 
 
-def _stale_limit(machine: MachineConfig) -> float:
+def _stale_limit(machine: MachineSettings) -> float:
     timeouts = machine.timeouts
     periods = machine.poll.periods
     return 3 * (timeouts.request_s + timeouts.connect_s + timeouts.backoff_max_s) + max(

@@ -25,7 +25,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Histo
 from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 
 from edge import __version__
-from edge.collect.poller import CYCLE_BUCKETS
+from edge.collect import CYCLE_BUCKETS
 from edge.service.daemon_view import DaemonView, spool_depth
 from edge.service.status_page import RateMeter, page_json, render_page, status_document
 

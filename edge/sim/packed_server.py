@@ -19,7 +19,7 @@ from collections.abc import Callable
 from edge.focas import packed as pk
 from edge.focas.errors import EW_ATTRIB, EW_FUNC, EW_LENGTH, CncError, ProtocolError
 from edge.focas.model import ParamRecord, PmcType
-from edge.focas.packed_endpoint import (
+from edge.focas.packed.endpoint import (
     PackedEndpoint,
     PackedRequest,
     error_answer,

@@ -4,7 +4,7 @@
  * exactly as fwlib32.h does (default branch, natural alignment as the Linux builds use), fills them from
  * in-memory state (parameters, macros, PMC, an alarm-history ring) and exports hooks the tests drive:
  * standin_* functions set state, inject a hang or a lost handle, and report every struct layout the C
- * compiler chose (standin_layouts), which tests/unit/test_fwlib_layout.py compares with the ctypes side.
+ * compiler chose (standin_layouts), which tests/unit/fwlib/test_structs.py compares with the ctypes side.
  *
  * Build: gcc -shared -fPIC -O1 -pthread -o libfwlib-standin.so standin.c
  */

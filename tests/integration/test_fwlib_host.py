@@ -23,8 +23,8 @@ from edge.focas import items as it
 from edge.focas import packed as pk
 from edge.focas.errors import AccessDenied, CncError, OutOfRange
 from edge.focas.model import ModalGCode
-from edge.focas.packed_client import PackedClient
-from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.focas.packed.client import PackedClient
+from edge.focas.packed.frame import FrameDecoder, PackedFrame
 from edge.fwlib import calls
 from edge.fwlib import structs as st
 from edge.fwlib.host import FwlibHost, start_host

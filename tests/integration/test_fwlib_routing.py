@@ -18,7 +18,7 @@ from edge.cli import EXIT_OK, main
 from edge.config import parse_config
 from edge.focas import packed as pk
 from edge.focas.model import SysInfo
-from edge.focas.packed_endpoint import start_packed_endpoint
+from edge.focas.packed.endpoint import start_packed_endpoint
 from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for

@@ -12,7 +12,6 @@ import pytest
 
 from edge.focas import items as it
 from edge.focas import packed as pk
-from edge.focas import packed_endpoint
 from edge.focas.errors import (
     AccessDenied,
     ConnectionLost,
@@ -23,8 +22,9 @@ from edge.focas.errors import (
     ProtocolError,
 )
 from edge.focas.model import ParamType, PmcType
-from edge.focas.packed_client import PackedClient
-from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.focas.packed import endpoint as packed_endpoint
+from edge.focas.packed.client import PackedClient
+from edge.focas.packed.frame import FrameDecoder, PackedFrame
 from edge.sim.packed_server import PackedServer, start_packed_server
 from edge.sim.state import MachineState
 from tests.helpers import async_wait_for

@@ -10,7 +10,7 @@ import pytest
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main
 from edge.focas import items as it
 from edge.focas.client import FocasClient
-from edge.focas.packed_client import PackedClient
+from edge.focas.packed.client import PackedClient
 from edge.focas.probe import Outcome, ProbeReport, ProbeStep, probe, probe_items
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from tests.helpers import free_port

@@ -289,8 +289,8 @@ async def test_primary_host_gating_and_stale_state(make_publisher: Callable[...,
     await async_wait_for(lambda: pub.session_state == "waiting_for_host", message="subscribed, waiting")
     await observer.publish("spBv1.0/STATE/OTHER", state(True, 5000), retain=True)  # another host: no birth
     await observer.publish(state_topic, state(False, 900), retain=True)
-    await async_wait_for(lambda: pub.counters["stale_state_ignored"] == 0 and pub._host is not None
-                         and pub._host.last_timestamp == 900, message="offline STATE seen")
+    await async_wait_for(lambda: pub.counters["stale_state_ignored"] == 0 and pub._spb.host is not None
+                         and pub._spb.host.last_timestamp == 900, message="offline STATE seen")
     assert observer.of("NBIRTH") == [] and pub.session_state == "waiting_for_host"
 
     await observer.publish(state_topic, state(True, 1000), retain=True)

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from edge.config import MachineConfig, parse_config
+from edge.collect.settings import MachineSettings
+from edge.config import parse_config
 from edge.focas import items as it
 from edge.focas.client import FocasClient
 from edge.focas.session import ItemResult
@@ -228,8 +229,8 @@ async def test_watchdog_is_withheld_while_a_poll_loop_is_wedged(
     monkeypatch.delenv("WATCHDOG_PID", raising=False)
     clients: list[WedgingClient] = []
 
-    def session_factory(machine: MachineConfig) -> WedgingClient:
-        client = WedgingClient("127.0.0.1", machine.port, timeout=0.2, connect_timeout=0.2)
+    def session_factory(machine: MachineSettings) -> WedgingClient:
+        client = WedgingClient("127.0.0.1", int(machine.endpoint.rsplit(":", 1)[1]), timeout=0.2, connect_timeout=0.2)
         clients.append(client)
         return client
 

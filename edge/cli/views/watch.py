@@ -14,9 +14,8 @@ from datetime import UTC, datetime
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
+from edge.publish import PublishSettings, apply_credentials
 from edge.publish import payload as spb
-from edge.publish.credentials import apply_credentials
-from edge.publish.settings import PublishSettings
 from edge.samples import MetricType, Quality
 
 Printer = Callable[[str], None]

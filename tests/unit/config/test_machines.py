@@ -6,6 +6,7 @@ import pytest
 
 from edge.collect.poller import default_session
 from edge.focas.client import MAX_SUBPACKETS
+from edge.service.settings import machine_settings
 from tests.unit.config.minimal import MINIMAL, parse, problems_of
 
 
@@ -56,7 +57,7 @@ def test_max_subpackets_reaches_the_client_and_is_checked() -> None:
           - {id: a, host: h}
           - {id: b, host: h, max_subpackets: 64}
     """)
-    clients = [default_session(m) for m in config.machines]
+    clients = [default_session(machine_settings(config, m)) for m in config.machines]
     assert [c.max_subpackets for c in clients] == [MAX_SUBPACKETS, 64]  # type: ignore[attr-defined]
     problems = problems_of("""
         mqtt: {host: b, formats: [json]}

@@ -1,7 +1,7 @@
 """Fuzz: every FOCAS response decoder (native subpacket payloads and write extras) on arbitrary bytes.
 
 Frames and the packed surface have their own property tests (test_frame_properties.py,
-test_packed_properties.py); these cover each function's payload layout, which is where a control of an
+packed/test_properties.py); these cover each function's payload layout, which is where a control of an
 unexpected series (or a broken one) sends bytes nobody planned for. Only ProtocolError (or a CncError a
 payload itself reports) may come out. `make fuzz` runs these with the long hypothesis profile.
 """

@@ -11,6 +11,7 @@ from edge.cli import main
 from edge.collect.poller import default_session
 from edge.config import parse_config
 from edge.focas.routed import LIBRARY, NATIVE, RoutedSession
+from edge.service.settings import machine_settings
 
 BASE = """
 mqtt:
@@ -56,7 +57,7 @@ def test_fwlib_host_only_beside_the_native_transport() -> None:
 
 def test_a_machine_with_both_routes_each_function_native_first() -> None:
     config = parse_config(BASE + "    host: 10.0.0.1\n    fwlib_host: 'tcp:127.0.0.1:18193'\n", "t.yaml", {})
-    session = default_session(config.machines[0])
+    session = default_session(machine_settings(config, config.machines[0]))
     assert isinstance(session, RoutedSession)
     assert session.route("ReadStatus") == NATIVE and session.route("ReadMacros") == NATIVE
     assert session.route("ReadAlarmHistory") == LIBRARY

@@ -10,15 +10,15 @@ from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.limits import check_limits
 from edge.command.policy import RateLimiter, authorise
 from edge.command.requests import make_op
+from edge.command.settings import AllowRule, RateLimit, WritePolicy
 from edge.command.target_io import check_param
-from edge.config import AllowRule, RateLimit, WritePolicy
 from edge.focas.model import ParamRecord, ParamType
 from edge.focas.targets import MacroTarget, parse_writable
 
 
 def policy(*rules: AllowRule, enabled: bool = True) -> WritePolicy:
-    return WritePolicy(enabled=enabled, allow=rules, rate_limit=RateLimit(), reconnect_deadline_s=1.0,
-                       max_payload_bytes=4096)
+    return WritePolicy(enabled=enabled, allow=rules, rate_limit=RateLimit(max_writes=10, per_s=60.0),
+                       reconnect_deadline_s=1.0)
 
 
 def code(target: str, value: object, p: WritePolicy) -> ErrorCode | None:

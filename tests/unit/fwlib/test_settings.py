@@ -11,7 +11,7 @@ from edge import ConfigError
 from edge.focas.model import ParamType
 from edge.fwlib.settings import HostMachine, load_settings
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "fwlib-host.yaml"
+EXAMPLE = Path(__file__).resolve().parents[3] / "config" / "fwlib-host.yaml"
 
 
 def test_the_example_config_loads() -> None:

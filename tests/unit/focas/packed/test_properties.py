@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from edge.focas import packed as pk
 from edge.focas.errors import CncError, ProtocolError
 from edge.focas.model import AlarmHistoryEntry, ParamRecord, ParamType
-from edge.focas.packed_frame import MAX_LENGTH, FrameDecoder, PackedFrame
+from edge.focas.packed.frame import MAX_LENGTH, FrameDecoder, PackedFrame
 
 ascii_text = st.text(alphabet=st.characters(min_codepoint=0x20, max_codepoint=0x7E), max_size=40)
 utc_times = st.datetimes(min_value=datetime(1, 1, 1), max_value=datetime(9999, 12, 31)).map(

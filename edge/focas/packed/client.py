@@ -21,7 +21,7 @@ from edge.focas import items as it
 from edge.focas import packed as pk
 from edge.focas.errors import ConnectionLost, FocasError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.model import Capabilities, ParamRecord, SysInfo
-from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.focas.packed.frame import FrameDecoder, PackedFrame
 from edge.focas.session import CncSession, ItemResult
 
 # Requests in flight before the client stops to read answers (keeps both socket buffers small).

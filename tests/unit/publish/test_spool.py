@@ -136,7 +136,7 @@ os.kill(os.getpid(), signal.SIGKILL)
 def test_kill_9_after_hold_loses_nothing(tmp_path: Path) -> None:
     path = tmp_path / "s.sqlite"
     proc = subprocess.run([sys.executable, "-c", CHILD, str(path), "300"], capture_output=True, timeout=60,
-                          cwd=Path(__file__).parents[2], env={**os.environ, "PYTHONPATH": "."})
+                          cwd=Path(__file__).parents[3], env={**os.environ, "PYTHONPATH": "."})
     assert proc.returncode == -signal.SIGKILL, proc.stderr
     assert b"held" in proc.stdout
     spool = DiskSpool(path)

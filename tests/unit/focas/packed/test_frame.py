@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from edge.focas.errors import ProtocolError
-from edge.focas.packed_frame import MAX_LENGTH, FrameDecoder, PackedFrame
+from edge.focas.packed.frame import MAX_LENGTH, FrameDecoder, PackedFrame
 
 
 def test_frame_layout() -> None:

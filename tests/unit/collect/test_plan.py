@@ -18,6 +18,7 @@ from edge.config import parse_config
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, ParamRecord, PmcType, ProgramNumbers, StatInfo, SysInfo
 from edge.samples import MetricSpec, MetricType
+from edge.service.settings import poll_settings
 
 CONFIG = """
 mqtt: {host: b, formats: [json]}
@@ -39,7 +40,7 @@ STATIC = StaticInfo(axis_names=("X", "Y", "B"), spindle_names=("S1", "S2"))
 @pytest.fixture
 def plan() -> MachinePlan:
     config = parse_config(CONFIG, "t", {})
-    return MachinePlan.build(config.machines[0], config.alarms, STATIC)
+    return MachinePlan.build(poll_settings(config.machines[0].poll, config.alarms), STATIC)
 
 
 def names(reads: list[PlannedRead]) -> list[str]:
@@ -83,7 +84,7 @@ def test_deadbands(plan: MachinePlan) -> None:
 
 def test_history_read_only_in_history_mode() -> None:
     config = parse_config(CONFIG.replace("mode: ActivePlusHistory", "mode: ActiveOnly"), "t", {})
-    plan = MachinePlan.build(config.machines[0], config.alarms)
+    plan = MachinePlan.build(poll_settings(config.machines[0].poll, config.alarms))
     assert plan.reads_for([Group.ALARM_HISTORY]) == []
     assert "Alarm/History" not in {s.name for s in plan.metrics()}
 
@@ -159,7 +160,7 @@ def test_pmc_bit_range_publishes_one_boolean_per_bit() -> None:
 
     machine = MachineConfig.model_validate(
         {"id": "m", "host": "h", "poll": {"pmc": [{"range": "R100-R101", "data_type": "bit"}]}})
-    plan = MachinePlan.build(machine, AlarmsConfig())
+    plan = MachinePlan.build(poll_settings(machine.poll, AlarmsConfig()))
     (read,) = plan.reads_for({Group.PMC})
     assert [m.name for m in read.metrics] == [f"PMC/R{a}.{b}" for a in (100, 101) for b in range(8)]
     assert {m.type for m in read.metrics} == {MetricType.BOOLEAN} and all(m.writable for m in read.metrics)

@@ -18,6 +18,7 @@ from edge.focas.errors import AccessDenied, FocasError, FocasTimeout
 from edge.focas.model import Capabilities, PmcType
 from edge.focas.targets import MacroTarget, ParamTarget, PmcTarget
 from edge.samples import Sample
+from edge.service.settings import poll_settings
 
 
 class MemorySession:
@@ -153,7 +154,7 @@ def test_dcmd_metric_names_map_to_targets_and_adjacent_pmc_merges() -> None:
     machine = MachineConfig.model_validate({"id": "m1", "host": "h", "poll": {
         "macros": ["500-502"], "pmc": [{"range": "D100-D107", "data_type": "word"}],
         "params": [{"number": 1825, "axis": 2}], "diags": [980]}})
-    plan = MachinePlan.build(machine, AlarmsConfig())
+    plan = MachinePlan.build(poll_settings(machine.poll, AlarmsConfig()))
     assert metric_target(plan, "Macro/501") == MacroTarget(501, 501)
     assert metric_target(plan, "PMC/D102") == PmcTarget("D", 102, 103, PmcType.WORD)
     assert metric_target(plan, "Param/1825/2") == ParamTarget(1825, 1825, 2)

@@ -1,6 +1,7 @@
-"""Fuzz the inbound command paths: Sparkplug NCMD/DCMD into the publisher, the JSON cmd topic dispatch and
-the JSON write-request parser. Nothing raises, and nothing reaches the write handler (the only way to a
-CNC) unless it is a declared, writable metric with a value of its declared type.
+"""Fuzz the publisher's inbound command paths: Sparkplug NCMD/DCMD and the JSON cmd topic dispatch. Nothing
+raises, and nothing reaches the write handler (the only way to a CNC) unless it is a declared, writable
+metric with a value of its declared type. (The JSON write-request parser is fuzzed in
+tests/unit/command/test_requests.py.)
 """
 
 from __future__ import annotations
@@ -12,10 +13,9 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
-from edge.command.errors import CommandRefused, ErrorCode
-from edge.command.requests import parse_request
+from edge.command.errors import ErrorCode
+from edge.publish import CommandSource, Publisher
 from edge.publish.mqtt import InboundMessage
-from edge.publish.publisher import CommandSource, Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType
@@ -52,7 +52,7 @@ def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[l
             (device, metric, code, reason))
         await pub.device_online("m1", SPECS, [])
         for msg in messages:
-            (pub._spb_message if fmt == "sparkplug" else pub._json_message)(msg)
+            (pub._spb.handle_message if fmt == "sparkplug" else pub._json.handle_message)(msg)
         await asyncio.sleep(0)
         await pub.stop()
         return pub
@@ -132,42 +132,6 @@ def test_fuzz_json_command_topics_dispatch_only_machine_cmd_topics(tmp_path_fact
     for machine, payload in calls:
         assert topic == f"focas/{machine}/cmd" and "/" not in machine and machine
         assert payload == data
-
-
-json_values = st.recursive(
-    st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=12)),
-    lambda children: st.one_of(st.lists(children, max_size=4),
-                               st.dictionaries(st.text(max_size=8), children, max_size=4)),
-    max_leaves=12)
-targets = st.one_of(st.sampled_from(["macro:500", "pmc:R100", "pmc:R100.3", "pmc:D2204:word", "param:1815",
-                                     "param:1815:1", "macro:", "pmc:Z9", ""]), st.text(max_size=16))
-requests = st.one_of(
-    json_values,
-    st.fixed_dictionaries({"target": targets, "value": json_values}, optional={"id": json_values}),
-    st.lists(st.fixed_dictionaries({"target": targets, "value": json_values}), max_size=3),
-)
-
-
-@given(requests)
-def test_fuzz_json_write_requests_parse_or_refuse(document: object) -> None:
-    import json
-
-    payload = json.dumps(document).encode()
-    try:
-        parsed = parse_request(payload, 4096)
-    except CommandRefused:
-        return
-    for item in parsed.items:
-        assert (item.op is None) != (item.refused is None), item
-
-
-@given(st.binary(max_size=300))
-def test_fuzz_json_write_request_bytes_parse_or_refuse(payload: bytes) -> None:
-    try:
-        parsed = parse_request(payload, 256)
-    except CommandRefused:
-        return
-    assert all((i.op is None) != (i.refused is None) for i in parsed.items)
 
 
 def test_the_harness_does_deliver_a_valid_dcmd(tmp_path: Path) -> None:

@@ -13,13 +13,15 @@ from edge import ConfigError
 from edge.collect.plan import Group, MachinePlan, StaticInfo, drop_key, metric_values
 from edge.config import parse_config
 from edge.focas import items as it
-from edge.focas import native, packed_client
+from edge.focas import native
 from edge.focas import packed as pk
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
 from edge.focas.functions import Context
 from edge.focas.model import ModalGCode
+from edge.focas.packed import client as packed_client
 from edge.focas.values import SlotForm
 from edge.samples import MetricType
+from edge.service.settings import poll_settings
 from edge.sim import packed_server
 from edge.sim.state import MachineState
 
@@ -94,7 +96,7 @@ machines:
 def test_work_offsets_are_opt_in_and_publish_one_double_per_axis_at_the_counters_period() -> None:
     static = StaticInfo(axis_names=("X", "Y", "B"))
     config = parse_config(WORK_OFFSET_CONFIG, "t", {})
-    plan = MachinePlan.build(config.machines[0], config.alarms, static)
+    plan = MachinePlan.build(poll_settings(config.machines[0].poll, config.alarms), static)
     reads = [r for r in plan.reads if isinstance(r.item, it.ReadWorkOffsets)]
     assert [r.item for r in reads] == [it.ReadWorkOffsets(1), it.ReadWorkOffsets(3)]
     assert {r.group for r in reads} == {Group.COUNTERS}
@@ -106,7 +108,7 @@ def test_work_offsets_are_opt_in_and_publish_one_double_per_axis_at_the_counters
             if isinstance(r.item, it.ReadWorkOffsets)] == [it.ReadWorkOffsets(3)]
     default = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "timers: true"), "t", {})
     assert not any(isinstance(r.item, it.ReadWorkOffsets)
-                   for r in MachinePlan.build(default.machines[0], default.alarms, static).reads)
+                   for r in MachinePlan.build(poll_settings(default.machines[0].poll, default.alarms), static).reads)
 
 
 @pytest.mark.parametrize("codes", ["[53]", "[60]", "[54, 54]"])
@@ -170,7 +172,7 @@ def test_simulator_answers_modal_codes_and_tool_number() -> None:
 def test_modal_and_tool_number_are_opt_in_counters_reads_with_one_metric_each() -> None:
     config = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "modal: true, tool_number: true"),
                           "t", {})
-    plan = MachinePlan.build(config.machines[0], config.alarms, StaticInfo(axis_names=("X",)))
+    plan = MachinePlan.build(poll_settings(config.machines[0].poll, config.alarms), StaticInfo(axis_names=("X",)))
     by_item = {type(r.item).__name__: r for r in plan.reads}
     modal, tool = by_item["ReadModalGCodes"], by_item["ReadToolNumber"]
     assert modal.group is Group.COUNTERS and tool.group is Group.COUNTERS
@@ -180,7 +182,7 @@ def test_modal_and_tool_number_are_opt_in_counters_reads_with_one_metric_each() 
         '{"0":"G01","13":"G54"}']
     assert [v for _, v in metric_values(tool, 12)] == [12]
     default = parse_config(WORK_OFFSET_CONFIG.replace("work_offsets: [54, 56]", "timers: true"), "t", {})
-    names = {s.name for s in MachinePlan.build(default.machines[0], default.alarms).metrics()}
+    names = {s.name for s in MachinePlan.build(poll_settings(default.machines[0].poll, default.alarms)).metrics()}
     assert not {"Modal/G", "Tool/Number"} & names
 
 

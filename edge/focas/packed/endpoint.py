@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 from edge.focas import packed as pk
 from edge.focas.errors import EW_ATTRIB, EW_LENGTH, EW_PASSWD, CncError, ProtocolError
-from edge.focas.packed_frame import FrameDecoder, PackedFrame
+from edge.focas.packed.frame import FrameDecoder, PackedFrame
 
 log = logging.getLogger(__name__)
 

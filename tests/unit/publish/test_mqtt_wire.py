@@ -129,7 +129,7 @@ def test_a_changed_private_queue_is_reported_not_used() -> None:
 def test_paho_is_pinned_to_the_checked_minor_versions() -> None:
     """A new paho minor may reshape private API: it is allowed only after the tests above pass with it.
     2.1 lacks Client.drop_out_messages (edge.publish.mqtt calls it on every CONNACK)."""
-    pyproject = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    pyproject = tomllib.loads((Path(__file__).parents[3] / "pyproject.toml").read_text())
     (spec,) = [Requirement(d) for d in pyproject["project"]["dependencies"] if d.startswith("paho-mqtt")]
     assert spec.specifier.contains(version("paho-mqtt")), "the installed paho is one the pin allows"
     checked = {"2.2.0", "2.2.9"}

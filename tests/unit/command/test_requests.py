@@ -173,3 +173,40 @@ def test_a_bad_or_conflicting_path_is_refused(body: dict[str, object], code: Err
     (item,) = parse_request(json.dumps(body).encode(), 4096).items
     assert item.op is None and item.refused is not None
     assert item.refused.code is code and why in item.refused.message
+
+
+# ---- fuzz: any JSON document or bytes parse or are refused, nothing else ----------------------------------
+fuzz_values = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=12)),
+    lambda children: st.one_of(st.lists(children, max_size=4),
+                               st.dictionaries(st.text(max_size=8), children, max_size=4)),
+    max_leaves=12)
+fuzz_targets = st.one_of(st.sampled_from(["macro:500", "pmc:R100", "pmc:R100.3", "pmc:D2204:word", "param:1815",
+                                          "param:1815:1", "macro:", "pmc:Z9", ""]), st.text(max_size=16))
+fuzz_requests = st.one_of(
+    fuzz_values,
+    st.fixed_dictionaries({"target": fuzz_targets, "value": fuzz_values}, optional={"id": fuzz_values}),
+    st.lists(st.fixed_dictionaries({"target": fuzz_targets, "value": fuzz_values}), max_size=3),
+)
+
+
+@given(fuzz_requests)
+def test_fuzz_json_write_requests_parse_or_refuse(document: object) -> None:
+    import json
+
+    payload = json.dumps(document).encode()
+    try:
+        parsed = parse_request(payload, 4096)
+    except CommandRefused:
+        return
+    for item in parsed.items:
+        assert (item.op is None) != (item.refused is None), item
+
+
+@given(st.binary(max_size=300))
+def test_fuzz_json_write_request_bytes_parse_or_refuse(payload: bytes) -> None:
+    try:
+        parsed = parse_request(payload, 256)
+    except CommandRefused:
+        return
+    assert all((i.op is None) != (i.refused is None) for i in parsed.items)

@@ -34,7 +34,7 @@ from edge.focas.frame import (
 from edge.focas.functions import Context
 from edge.focas.values import SlotForm, decode_scaled
 
-VECTORS_PATH = Path(__file__).parents[1] / "data/focas-vectors.json"
+VECTORS_PATH = Path(__file__).parents[2] / "data/focas-vectors.json"
 
 
 def _load() -> dict[tuple[str, str], dict[str, Any]]:

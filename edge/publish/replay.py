@@ -1,0 +1,159 @@
+"""Replaying the spool after a reconnect: oldest first, paced, each row as its own historical message(s).
+
+Runs while live data flows. A batch of rows is acknowledged (deleted from the spool) only after a delivery
+barrier on the same connection (edge.publish.link), so a crash or a lost connection during a replay sends
+the rows again: at-least-once. For Sparkplug, what the host already has (births, live batches spooled
+behind a hold, rows an earlier replay sent) is skipped (edge.publish.replay_dedupe).
+
+A `Replayer` serves one format; the format's session is its `ReplayTarget` (when to replay, which devices,
+how a row becomes historical messages).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any, Protocol
+
+from edge.publish.holding import ReplaySpool, Spool
+from edge.publish.link import DeliveryLink
+from edge.publish.mqtt import MqttConnection
+from edge.publish.node import Outgoing
+from edge.publish.replay_dedupe import DeliveredValues
+from edge.publish.tasks import BackgroundTasks
+from edge.samples import Sample
+
+log = logging.getLogger(__name__)
+
+
+class ReplayTarget(Protocol):
+    """The format side of a replay."""
+
+    def replay_ready(self) -> bool:
+        """Rows may go out now (Sparkplug: born and no rebirth pending)."""
+        ...
+
+    def replay_devices(self) -> list[str] | None:
+        """The devices whose rows may go out (None: all)."""
+        ...
+
+    def replay_accepts(self, device_id: str) -> bool:
+        """This device's rows may still go out (it may have gone offline since the query)."""
+        ...
+
+    def historical(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
+        """The messages of one spool row (`samples`, already marked historical)."""
+        ...
+
+
+class Replayer:
+    """Replays one format's spooled rows over its link; at most one replay runs at a time."""
+
+    def __init__(self, link: DeliveryLink, target: ReplayTarget, spool: Spool, counters: Counter[str],
+                 tasks: BackgroundTasks, delivered: DeliveredValues | None = None) -> None:
+        self._link = link
+        self._target = target
+        self._spool = spool
+        self._counters = counters
+        self._tasks = tasks
+        self._delivered = delivered  # Sparkplug only: skip what the host has
+        self._replaying = False
+        self._again = False  # a kick came while replaying: look for rows once more before ending
+
+    def kick(self) -> None:
+        """Start replaying the spool (or make the running replay look again)."""
+        if self._tasks.stopping or not isinstance(self._spool, ReplaySpool):
+            return
+        if self._replaying:
+            self._again = True
+            return
+        conn = self._link.conn
+        if conn is None:
+            return
+        self._replaying = True
+        self._again = False
+        self._tasks.spawn(self._replay(conn, self._link.session))
+
+    def drain_waiting_rows(self) -> None:
+        """Rows still waiting with no replay running (a replay that failed, a spool that had no room to
+        delete): replay them now, not at the next reconnect."""
+        spool = self._spool
+        if self._replaying or not isinstance(spool, ReplaySpool) or not self._target.replay_ready():
+            return
+        if spool.pending(self._link.fmt):
+            self.kick()
+
+    async def _replay(self, conn: MqttConnection, session: int) -> None:
+        try:
+            await self._replay_rows(conn, session)
+        except Exception as exc:  # the spool failed: the rows stay and the probe loop kicks a new replay
+            self._counters["replay_errors"] += 1
+            log.error("spool replay failed, retried within a probe interval format=%s error=%s",
+                      self._link.fmt, exc)
+        finally:
+            self._replaying = False
+
+    async def _replay_rows(self, conn: MqttConnection, session: int) -> None:
+        """Oldest first, paced, each row as its own historical message(s); rows acked after a barrier."""
+        spool = self._spool
+        assert isinstance(spool, ReplaySpool)
+        link, target, delivered, fmt = self._link, self._target, self._delivered, self._link.fmt
+        pause = 1.0 / link.policy.replay_rows_per_s
+        started = time.monotonic()
+        sent_rows = 0
+
+        def current() -> bool:
+            return (session == link.session and conn.connected and not link.suspect
+                    and not self._tasks.stopping and target.replay_ready())
+
+        while current():
+            entries = spool.oldest(fmt, link.policy.replay_batch, target.replay_devices())
+            if not entries:
+                if self._again:
+                    self._again = False
+                    continue
+                break
+            done: list[int] = []
+            for entry in entries:
+                if not target.replay_accepts(entry.device_id):
+                    continue  # went offline since the query: its rows wait for its next DBIRTH
+                done.append(entry.id)
+                samples = delivered.fresh(entry.device_id, entry.samples) if delivered is not None \
+                    else entry.samples
+                messages = self._historical_messages(entry, samples)
+                for m in messages:
+                    if not current():
+                        return
+                    if not link.send(conn, (m,)):
+                        link.suspect_dead(conn, "replay publish refused by the MQTT client")
+                        return
+                    self._counters["replayed_messages"] += 1
+                if delivered is not None and messages:
+                    delivered.record(entry.device_id, samples)
+                await asyncio.sleep(pause)  # per row: a tick's worth of one machine
+            if not current() or not await link.barrier(conn):
+                return
+            spool.ack(done)
+            if delivered is not None:
+                acked = set(done)
+                for entry in entries:
+                    if entry.id in acked:
+                        delivered.discard(entry.device_id, entry.samples)
+            self._counters["replayed_rows"] += len(done)
+            sent_rows += len(done)
+        left = spool.pending(fmt)
+        if delivered is not None and not left:
+            delivered.forget()
+        if sent_rows:
+            log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
+                     time.monotonic() - started, left)
+
+    def _historical_messages(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
+        if not samples:
+            return []
+        samples = [s if s.historical else replace(s, historical=True) for s in samples]
+        return self._target.historical(entry, samples)
