@@ -22,8 +22,9 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
     spy = Path(args.spy) if args.spy else None
 
     def run_fleet() -> Result:
+        periods = [float(p) for p in args.period.split(",")] if args.period else None
         result = fleet.run(quick=args.quick, sizes=sizes, repeats=args.repeat, duration_s=args.duration,
-                           spy_to=spy, py_spy=args.py_spy)
+                           spy_to=spy, py_spy=args.py_spy, periods=periods, warmup_s=args.warmup)
         return result
 
     return {
@@ -42,6 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=2, help="repeat each fleet size this often (default 2)")
     parser.add_argument("--sizes", default="", help="fleet sizes, comma separated (default 10,50,100,200)")
     parser.add_argument("--duration", type=float, default=None, help="fleet measuring window, seconds")
+    parser.add_argument("--period", default="", metavar="SECONDS",
+                        help="fleet: poll period of every machine, seconds; comma separated for several (default 0.1)")
+    parser.add_argument("--warmup", type=float, default=None,
+                        help="fleet: seconds between the last birth and the window (default 10)")
     parser.add_argument("--latency", type=float, default=roundtrip.LATENCY_S,
                         help="simulated per-request latency for roundtrip, seconds (default 0.002)")
     parser.add_argument("--spy", default="", metavar="FILE",

@@ -19,8 +19,7 @@ from edge.focas.values import decode_scaled_list, encode_scaled_list
 from edge.publish.aliases import AliasMap
 from edge.publish.node import SparkplugNode
 from edge.samples import MetricSpec, MetricType, Quality, Sample
-from edge.sim.native_server import answer_subpacket
-from edge.sim.state import MachineState
+from edge.sim import MachineState, answer_subpacket
 
 SPARKPLUG_TARGET = 1_000_000  # metrics/s
 SUBPACKET_TARGET = 100_000  # native response subpackets/s

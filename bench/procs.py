@@ -24,11 +24,13 @@ def python_env() -> dict[str, str]:
 class SimProcess:
     """`python -m bench.simproc` as a child: ports once ready, stats on request."""
 
-    def __init__(self, machines: int, *, latency: float = 0.0, stamp_macro: int = 0, fill_macros: str = "",
-                 packed: bool = False, timeout: float = 60.0) -> None:
+    def __init__(self, machines: int, *, latency: float = 0.0, stamp_macro: int = 0, clock_macro: int = 0,
+                 fill_macros: str = "", packed: bool = False, timeout: float = 60.0) -> None:
         command = [sys.executable, "-m", "bench.simproc", "--machines", str(machines), "--latency", str(latency)]
         if stamp_macro:
             command += ["--stamp-macro", str(stamp_macro)]
+        if clock_macro:
+            command += ["--clock-macro", str(clock_macro)]
         if fill_macros:
             command += ["--fill-macros", fill_macros]
         if packed:

@@ -1,12 +1,15 @@
 """A simulated fleet in its own process, driven over stdin/stdout by a benchmark.
 
-    python -m bench.simproc --machines 50 [--latency 0.002] [--stamp-macro 509] [--fill-macros 500-599]
+    python -m bench.simproc --machines 50 [--latency 0.002] [--stamp-macro 509] [--clock-macro 508]
+                            [--fill-macros 500-599]
 
 Prints one JSON line ``{"ports": [...]}`` when every machine listens, then answers each ``stats`` line
 on stdin with a JSON line (data PDUs and subpackets served, this process's CPU seconds); ``stop`` or
 end of input closes the fleet. With --stamp-macro each machine sets that macro to its own wall-clock
 time (seconds modulo 1000, millisecond resolution) at random moments, so a subscriber can tell how
-long a change took to reach the broker: latency = receipt time - value (mod 1000).
+long a change took to reach the broker: latency = receipt time - value (mod 1000). With --clock-macro that
+macro reads as the CNC's clock at the moment it answers, so a published timestamp minus its value is the
+timestamp's error (edge.sim.state_clock.clock_macro_error).
 """
 
 from __future__ import annotations
@@ -20,8 +23,7 @@ import random
 import sys
 import time
 
-from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim import CycleSpec, Fleet, MachineSpec
 
 STAMP_MODULO = 1000.0
 WRITE_LOG_LIMIT = 1000
@@ -54,6 +56,7 @@ async def stamp_changes(fleet: Fleet, macro: int, low: float, high: float) -> No
 def stats(fleet: Fleet) -> dict[str, float]:
     times = os.times()
     return {"data_pdus": sum(m.native.stats.data_pdus for m in fleet),
+            "clock_pdus": sum(m.native.stats.clock_pdus for m in fleet),
             "subpackets": sum(m.native.stats.subpackets for m in fleet),
             "cpu_s": times.user + times.system, "time": time.time()}
 
@@ -63,7 +66,8 @@ async def serve(args: argparse.Namespace) -> None:
     numbers = range(int(first), int(last or first) + 1) if first else range(0)
     macros: dict[int, float | None] = {n: float(n) + 0.5 for n in numbers}
     specs = [MachineSpec(profile=args.profile, macros=macros, faults={"latency": args.latency},
-                         cycle=CycleSpec(alarm_every=0)) for _ in range(args.machines)]
+                         cycle=CycleSpec(alarm_every=0), clock_macro=args.clock_macro or None)
+             for _ in range(args.machines)]
     fleet = Fleet(specs, base_port=0, packed_base_port=0 if args.packed else None)
     await fleet.start()
     stamper = None
@@ -95,6 +99,7 @@ def main() -> None:
     parser.add_argument("--profile", default="30i")
     parser.add_argument("--latency", type=float, default=0.0, help="seconds before each answer")
     parser.add_argument("--stamp-macro", type=int, default=0)
+    parser.add_argument("--clock-macro", type=int, default=0, help="a macro that reads as the CNC clock")
     parser.add_argument("--stamp-min", type=float, default=0.2)
     parser.add_argument("--stamp-max", type=float, default=0.6)
     parser.add_argument("--packed", action="store_true", help="also serve the packed surface")

@@ -4,6 +4,8 @@ Runs paho's network loop in a thread of the benchmark process (not the gateway's
 notes the receipt time; the stamp macro's value is the simulator's wall-clock time of the change, so
 receipt minus value is change-to-broker latency (both clocks are this host's). The first metric's
 timestamp (the CNC time the gateway stamped the tick with; clock offset 0) gives read-to-broker latency.
+The clock macro's value is the simulator's clock when it answered the tick's request, so its timestamp
+minus its value is the stamp's error.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from bench.simproc import stamp_latency
 from edge.publish.sparkplug_b_pb2 import Payload
+from edge.sim.state_clock import clock_macro_error
 
 OVERRUNS_METRIC = "Gateway/PollOverruns"
 
@@ -25,17 +28,20 @@ OVERRUNS_METRIC = "Gateway/PollOverruns"
 class LatencySubscriber:
     """Subscribes to one Sparkplug group; `recording` decides whether latencies are kept."""
 
-    def __init__(self, host: str, port: int, group: str, stamp_metric: str) -> None:
+    def __init__(self, host: str, port: int, group: str, stamp_metric: str, clock_metric: str = "") -> None:
         self.group = group
         self.stamp_metric = stamp_metric
+        self.clock_metric = clock_metric
         self.recording = False
         self.change_latency_s: list[float] = []
         self.sample_latency_s: list[float] = []
+        self.stamp_error_s: list[float] = []
         self.births: set[str] = set()
         self.deaths = 0
         self.ddata = Counter[str]()
         self.overruns: int | None = None
         self._stamp_alias: dict[str, int] = {}
+        self._clock_alias: dict[str, int] = {}
         self._node_aliases: dict[int, str] = {}
         self._lock = threading.Lock()
         self._subscribed = threading.Event()
@@ -79,20 +85,27 @@ class LatencySubscriber:
             return
         sample = received - metrics[0].timestamp / 1000
         stamp_alias = self._stamp_alias.get(device)
-        change = None
+        clock_alias = self._clock_alias.get(device)
+        change = error = None
         for metric in metrics:
             if metric.alias == stamp_alias:
                 change = stamp_latency(metric.double_value, received)
+            elif metric.alias == clock_alias and not metric.is_null:
+                error = clock_macro_error(metric.timestamp / 1000, metric.double_value)
         with self._lock:
             self.sample_latency_s.append(sample)
             if change is not None:
                 self.change_latency_s.append(change)
+            if error is not None:
+                self.stamp_error_s.append(error)
 
     def _dbirth(self, device: str, data: bytes) -> None:
         payload = Payload.FromString(data)
         for metric in payload.metrics:
             if metric.name == self.stamp_metric:
                 self._stamp_alias[device] = metric.alias
+            elif metric.name == self.clock_metric:
+                self._clock_alias[device] = metric.alias
         with self._lock:
             self.births.add(device)
 
@@ -106,8 +119,14 @@ class LatencySubscriber:
                 self.overruns = int(metric.long_value)
 
     def take(self) -> tuple[list[float], list[float]]:
-        """The latencies recorded so far (and forget them)."""
+        """The latencies recorded so far (and forget them, with the stamp errors)."""
         with self._lock:
             change, sample = self.change_latency_s, self.sample_latency_s
-            self.change_latency_s, self.sample_latency_s = [], []
+            self.change_latency_s, self.sample_latency_s, self.stamp_error_s = [], [], []
         return change, sample
+
+    def take_stamp_errors(self) -> list[float]:
+        """Timestamp minus simulator clock, seconds, per clock-macro value recorded so far (and forget them)."""
+        with self._lock:
+            errors, self.stamp_error_s = self.stamp_error_s, []
+        return errors

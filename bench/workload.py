@@ -11,6 +11,7 @@ from edge.focas.model import PmcType
 
 MACRO_FIRST, MACRO_LAST = 500, 509
 STAMP_MACRO = 509  # the fleet simulator sets this one to its own wall-clock time (seconds mod 1000)
+CLOCK_MACRO = 508  # and answers this one with its CNC clock at the moment it answers (timestamp error)
 PMC_RANGES = (("R", 100, 103, PmcType.BYTE), ("D", 2204, 2207, PmcType.WORD), ("G", 0, 7, PmcType.BYTE),
               ("F", 0, 3, PmcType.BYTE))
 
@@ -33,7 +34,9 @@ def machines_section(ports: list[int], period_s: float) -> str:
 
 
 def poll_section(period_s: float) -> str:
-    """The `poll:` YAML of one machine for the same plan, every group every `period_s`."""
+    """The `poll:` YAML of one machine for the same plan: status, macros and PMC every `period_s`; servo loads
+    (1 s) and counters (10 s) at their defaults, or every `period_s` when it is slower (a machine polled every
+    3 s must not tick every second for its loads)."""
     pmc = ", ".join(f"{{range: {a}{s}-{a}{e}, data_type: {t.name.lower()}}}" for a, s, e, t in PMC_RANGES)
-    return (f"{{periods: {{status: {period_s}, macros: {period_s}, pmc: {period_s}}}, "
-            f"macros: [{MACRO_FIRST}-{MACRO_LAST}], pmc: [{pmc}]}}")
+    return (f"{{periods: {{status: {period_s}, macros: {period_s}, pmc: {period_s}, loads: {max(period_s, 1.0)}, "
+            f"counters: {max(period_s, 10.0)}}}, macros: [{MACRO_FIRST}-{MACRO_LAST}], pmc: [{pmc}]}}")

@@ -56,10 +56,7 @@ def register(subparsers: Any) -> None:
 
 def build_scenario(args: argparse.Namespace) -> Any:
     """The Scenario the arguments describe (a file, or the flags)."""
-    from edge.sim.fleet import MachineSpec
-    from edge.sim.profiles import get_profile
-    from edge.sim.scenario import Scenario, load_scenario
-    from edge.sim.state import CycleSpec
+    from edge.sim import CycleSpec, MachineSpec, Scenario, get_profile, load_scenario
 
     if args.scenario:
         if args.machines is not None:
@@ -105,8 +102,7 @@ def run_sim(args: argparse.Namespace) -> int:
 
 async def serve(scenario: Any) -> int:
     """Run the fleet (and admin endpoint) until SIGINT/SIGTERM."""
-    from edge.sim.admin import AdminServer
-    from edge.sim.fleet import Fleet
+    from edge.sim import AdminServer, Fleet
 
     fleet = Fleet(scenario.machines, host=scenario.host, base_port=scenario.base_port,
                   packed_base_port=scenario.packed_base_port)

@@ -31,6 +31,22 @@ The CNC time of any gateway moment is then `m_now + θ`. The skew — CNC minus 
 published as a metric. Beyond `max_skew_s` (dead clock battery, wrong time zone) the tracker says to
 use gateway time instead, with the reason, and goes back to CNC time as soon as the skew is within
 the limit again.
+
+Ticks alone do not always narrow the interval: at a poll period that divides one second (1 s, 500 ms,
+250 ms, even 50 ms) every tick reads the CNC clock at the same few phases of its second, so θ stays
+known only to the tick spacing (±500 ms at 1 Hz). The poller therefore adds a few clock-only reads
+timed where the tracker predicts the CNC second flips (edge.collect.clock_probe): each one halves the
+interval, so a handful reach the round-trip limit. `synchronised` says when stamps are within
+SYNC_TARGET_S of the CNC's clock; until then stamps are the middle of the interval, off by at most
+`uncertainty_s`.
+
+Clocks drift apart (a CNC's real-time clock and the gateway's crystal, tens of ppm each), so a reading
+is trusted less as it ages: with `drift_rate` r a reading taken at `m_i` bounds θ at a later time `t`
+only to [lower_i - r(t - m_i), upper_i + r(t - m_i)]. The estimate (the middle) does not move as
+readings age, the uncertainty grows by r per second, so `uncertainty_s` stays an honest bound and the
+poller re-reads the clock when it has grown past its goal. Stored as `lower_i + r m_i` and
+`upper_i - r m_i`, a reading's rank among the others never changes with time, so the sliding-window
+extremes below still hold.
 """
 
 from __future__ import annotations
@@ -45,6 +61,8 @@ DEFAULT_WINDOW_S = 300.0
 MAX_READINGS = 512
 STEP_MIN_S = 1.0  # a reading this far outside the window's interval is a clock step, not drift or jitter
 SLEW_RATE = 0.5  # seconds the stamping offset may fall per second: stamps advance at least at half speed
+SYNC_TARGET_S = 0.020  # stamps within this of the CNC's clock count as synchronised (Clock/Synchronised)
+MAX_DRIFT_RATE = 100e-6  # CNC vs gateway clock rate difference assumed at most (s/s): two crystals, some heat
 
 
 def cnc_to_utc_seconds(cnc_wall: datetime, zone: ZoneInfo) -> float:
@@ -66,8 +84,8 @@ class ClockTransition(enum.Enum):
 
 @dataclass(frozen=True, slots=True)
 class _Reading:
-    lower: float  # c - m - u: the offset is at least this
-    upper: float  # c - m + 1 + u: and less than this
+    lower: float  # c - m - u (+ r m, see the module docstring): the offset is at least this
+    upper: float  # c - m + 1 + u (- r m): and less than this
     monotonic: float
     seq: int  # its position in the stream of readings
 
@@ -75,10 +93,12 @@ class _Reading:
 class ClockTracker:
     """Offset estimate between one CNC's clock and the gateway's; see the module docstring."""
 
-    def __init__(self, zone: ZoneInfo | str, max_skew_s: float, window_s: float = DEFAULT_WINDOW_S) -> None:
+    def __init__(self, zone: ZoneInfo | str, max_skew_s: float, window_s: float = DEFAULT_WINDOW_S,
+                 drift_rate: float = 0.0) -> None:
         self.zone = zone if isinstance(zone, ZoneInfo) else ZoneInfo(zone)
         self.max_skew_s = max_skew_s
         self.window_s = window_s
+        self.drift_rate = drift_rate  # r: how fast an old reading's bounds widen (0: they never do)
         # Only the readings that can still be an extreme of the window are kept (a reading whose bound a
         # later one beats never matters again): sliding-window extremes in amortised O(1) per tick, and a
         # few readings per machine instead of the whole window (512 readings were ~60 KB per machine).
@@ -86,8 +106,10 @@ class ClockTracker:
         self._count = 0  # readings observed since the last reset
         self._max_lower: deque[_Reading] = deque()
         self._min_upper: deque[_Reading] = deque()
-        self._low = float("-inf")
+        self._low = float("-inf")  # the interval's bounds as stored (aged by r at the time asked)
         self._high = float("inf")
+        self._latest = 0.0  # monotonic time of the newest reading
+        self.revision = 0  # bumped by every reading and reset: a cache key for plans made from the interval
         self._skew: float | None = None
         self._use_gateway = True
         self._reason: str | None = "no CNC clock reading yet"
@@ -115,25 +137,30 @@ class ClockTracker:
         """
         base = cnc_epoch_s - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
-        return base - margin > self._low or base + 1.0 + margin < self._high
+        aged = self.drift_rate * gateway_monotonic
+        return base - margin + aged > self._low or base + 1.0 + margin - aged < self._high
 
     def observe_epoch(self, cnc_epoch_s: float, gateway_monotonic: float, gateway_wall: float,
                       half_rtt_s: float = 0.0) -> ClockTransition | None:
         """As observe(), with the CNC time already converted to epoch seconds (UTC)."""
         base = cnc_epoch_s - gateway_monotonic
         margin = max(half_rtt_s, 0.0)
-        reading = _Reading(base - margin, base + 1.0 + margin, gateway_monotonic, self._count + 1)
-        if self._count and max(reading.lower - self._high, self._low - reading.upper) > STEP_MIN_S:
+        aged = self.drift_rate * gateway_monotonic  # 0.0 without drift: the bounds exactly as read
+        reading = _Reading(base - margin + aged, base + 1.0 + margin - aged, gateway_monotonic, self._count + 1)
+        spread = 2 * aged  # a stored lower minus a stored upper, less this, is the aged gap at this moment
+        if self._count and max(reading.lower - self._high, self._low - reading.upper) - spread > STEP_MIN_S:
             self._stepped(base + 0.5)
         self._count += 1
+        self.revision += 1
+        self._latest = gateway_monotonic
         self._add(reading)
         self._evict(self._count - MAX_READINGS, gateway_monotonic, self.window_s)
         self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
-        if self._low >= self._high:
+        if self._low - self._high >= spread:
             # Inconsistent with the window: the CNC clock jumped (or drifted). Keep the newest
             # readings that still agree with each other and drop the older ones.
             self.restarts += 1
-            self._evict(self._agreeing_since(), gateway_monotonic, float("inf"))
+            self._evict(self._agreeing_since(spread), gateway_monotonic, float("inf"))
             self._low, self._high = self._max_lower[0].lower, self._min_upper[0].upper
         offset = self.offset_s
         assert offset is not None
@@ -162,8 +189,9 @@ class ClockTracker:
             while len(extremes) > 1 and (extremes[0].seq < first_seq or now - extremes[0].monotonic > window_s):
                 extremes.popleft()
 
-    def _agreeing_since(self) -> int:
-        """The first reading of the longest run of newest readings whose intervals still intersect.
+    def _agreeing_since(self, spread: float) -> int:
+        """The first reading of the longest run of newest readings whose intervals (aged to the newest
+        reading: `spread`, see observe_epoch) still intersect.
 
         Walking back from the newest reading, the intersection only changes at a kept reading (any other
         is beaten by a later one in both bounds), so the kept ones, merged newest first, decide it.
@@ -172,7 +200,7 @@ class ClockTracker:
         low, high = float("-inf"), float("inf")
         for reading in events:
             low, high = max(low, reading.lower), min(high, reading.upper)
-            if low >= high:
+            if low - high >= spread:
                 return reading.seq + 1
         return events[-1].seq
 
@@ -201,8 +229,30 @@ class ClockTracker:
 
     @property
     def uncertainty_s(self) -> float | None:
-        """Half-width of the feasible interval: how far the estimate can be off."""
-        return (self._high - self._low) / 2 if self._count else None
+        """Half-width of the feasible interval at the newest reading: how far the estimate can be off."""
+        return self.uncertainty_at(self._latest)
+
+    def uncertainty_at(self, gateway_monotonic: float) -> float | None:
+        """Half-width of the feasible interval at a gateway moment (it grows by `drift_rate` per second)."""
+        if not self._count:
+            return None
+        return (self._high - self._low) / 2 + self.drift_rate * gateway_monotonic
+
+    def slew_lag_at(self, gateway_monotonic: float) -> float:
+        """How far above the estimate a stamp given at this moment would be (> 0 only while stamps slew
+        after the offset fell: they may not go back)."""
+        offset = self.offset_s
+        if self._stamp is None or offset is None:
+            return 0.0
+        last_mono, last_offset = self._stamp
+        return max(last_offset - SLEW_RATE * max(gateway_monotonic - last_mono, 0.0) - offset, 0.0)
+
+    def synchronised_at(self, gateway_monotonic: float) -> bool:
+        """Whether a stamp given at this moment is within SYNC_TARGET_S of the CNC's clock: CNC time in
+        use, the offset known that well, and no slew after a step back still under way."""
+        uncertainty = self.uncertainty_at(gateway_monotonic)
+        return (not self._use_gateway and uncertainty is not None
+                and uncertainty + self.slew_lag_at(gateway_monotonic) <= SYNC_TARGET_S)
 
     @property
     def skew_s(self) -> float | None:
@@ -237,6 +287,7 @@ class ClockTracker:
         self._max_lower.clear()
         self._min_upper.clear()
         self._low, self._high = float("-inf"), float("inf")
+        self.revision += 1
         self._skew = None
         self._stamp = None
         self._use_gateway = True

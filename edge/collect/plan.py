@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from edge.collect.clock import SYNC_TARGET_S
 from edge.collect.settings import PollSettings
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
@@ -88,6 +89,11 @@ SYSINFO_METRICS: tuple[tuple[MetricSpec, Callable[[SysInfo], object]], ...] = (
 CLOCK_SKEW = MetricSpec("Clock/Skew", MetricType.DOUBLE, "s", description="CNC minus gateway time")
 CLOCK_GATEWAY = MetricSpec("Clock/UsingGatewayTime", MetricType.BOOLEAN,
                            description="true while the CNC clock is beyond max_skew_s")
+CLOCK_UNCERTAINTY = MetricSpec("Clock/OffsetUncertainty", MetricType.DOUBLE, "ms",
+                               description="how far a CNC timestamp can be off (half the offset interval)")
+CLOCK_SYNCHRONISED = MetricSpec("Clock/Synchronised", MetricType.BOOLEAN,
+                                description=f"true while CNC timestamps are within {SYNC_TARGET_S * 1000:g} ms of the "
+                                            "CNC clock")
 ALARM_ACTIVE = MetricSpec("Alarm/Active", MetricType.STRING, description="JSON list of active alarms")
 ALARM_COUNT = MetricSpec("Alarm/Count", MetricType.INT32)
 ALARM_EVENT = MetricSpec("Alarm/Event", MetricType.STRING, description="JSON raise/clear event")
@@ -111,7 +117,7 @@ AXIS_NAMES = MetricSpec("Device/AxisNames", MetricType.STRING)
 SPINDLE_NAMES = MetricSpec("Device/SpindleNames", MetricType.STRING)
 
 # Metrics the collector fills itself (not from one read item).
-CLOCK_METRICS = (CLOCK_SKEW, CLOCK_GATEWAY)
+CLOCK_METRICS = (CLOCK_SKEW, CLOCK_GATEWAY, CLOCK_UNCERTAINTY, CLOCK_SYNCHRONISED)
 EVENT_METRICS = (ALARM_EVENT,)
 
 

@@ -1,10 +1,11 @@
 """One machine's polling loop: connect, read static data, then tick until the session breaks.
 
 A tick batches every due group plus the CNC clock into ONE request (one network round trip), turns
-the results into samples stamped with CNC time, and hands what changed to the sink. A failed item
-only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is dropped
-from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and at
-every reconnect, since one transient answer must not end a data stream. A broken session ends in
+the results into samples stamped with CNC time, and hands what changed to the sink. Between ticks, a
+few clock-only reads timed by edge.collect.clock_probe keep the CNC-vs-gateway offset to milliseconds.
+A failed item only marks its own metrics bad; a function the control does not have (EW_FUNC/EW_NOOPT) is
+dropped from this machine's plan (a WARNING the first time) and tried again after `poll.retry_dropped` and
+at every reconnect, since one transient answer must not end a data stream. A broken session ends in
 device_offline, backoff, and a fresh birth with the full state on recovery.
 
 What a tick sends, prepared once per plan, is edge.collect.tick_batch; the counters are edge.collect.stats.
@@ -22,7 +23,6 @@ import time
 from collections.abc import Callable, Sequence
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
-from datetime import datetime
 from itertools import compress
 from operator import is_not
 from pathlib import Path
@@ -34,7 +34,7 @@ from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
-from edge.collect.clock import ClockTracker, cnc_to_utc_seconds
+from edge.collect.clock_feed import ClockFeed
 from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
 from edge.collect.settings import MachineSettings
 from edge.collect.stats import PollerStats
@@ -75,6 +75,7 @@ class TickResult:
 
 _NOT_IN_TICK = frozenset({pl.Group.ACTIVE_ALARMS, pl.Group.STATIC})  # read on change / once per session
 _NOTHING = object()  # no previous result (compares unequal to any result)
+PROBE_ITEMS = (it.ReadClock(),)  # a clock-only read (one stable tuple: the client reuses its request)
 
 
 SessionFactory = Callable[[MachineSettings], CncSession]
@@ -104,7 +105,8 @@ class MachinePoller:
         self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
         self.last_error = ""  # the last connect, session or read error, for the status page
         self.last_progress = time.monotonic()
-        self.clock = ClockTracker(machine.zone, machine.max_skew_s)
+        self._clock = ClockFeed(machine.id, machine.zone, machine.max_skew_s)
+        self.clock = self._clock.tracker
         self._jitter_s = jitter_s
         self._changes = ChangeDetector()
         self._alarms = ActiveAlarmProjection()
@@ -125,9 +127,6 @@ class MachinePoller:
         # Per read of the current plan (by index in plan.reads), its last good result: a read whose
         # result is that very object again did not move (the client hands an unchanged answer's value back).
         self._last_raw: list[object] = []
-        self._clock_reading: object = _NOTHING  # the CNC clock value of the last tick (unchanged within a second)
-        self._clock_epoch = 0.0  # that value as epoch seconds
-        self._clock_mode_logged: bool | None = None  # the clock mode last announced in the log
         self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
         self._paths = PathCheck(machine)
 
@@ -235,7 +234,7 @@ class MachinePoller:
         schedule.due(time.monotonic())  # static group already read above
         self._changes = ChangeDetector(plan.deadbands())
         self._last_raw = [_NOTHING] * len(plan.reads)
-        self._clock_reading = _NOTHING
+        self._clock.new_session()
         first = await self._tick(plan, frozenset(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
@@ -252,6 +251,8 @@ class MachinePoller:
         fastest = min(plan.periods.values())
         while True:
             next_due = schedule.next_due() or time.monotonic() + fastest
+            if await self._probe_clock_before(next_due):
+                continue
             await self._grid.sleep_until(next_due)
             started = time.monotonic()
             groups = schedule.due(started)
@@ -271,12 +272,17 @@ class MachinePoller:
                 self.stats.overruns += 1
 
     async def _read_static(self) -> pl.StaticInfo:
-        results = await self.session.batch([it.ReadAxisNames(), it.ReadSpindleNames()])
+        items = [it.ReadAxisNames(), it.ReadSpindleNames()]
+        results = await self.session.batch(items)
         axes = results[0] if isinstance(results[0], list) else []
         spindles = results[1] if isinstance(results[1], list) else []
-        for result in results:
-            if isinstance(result, FocasError):
+        for item, result in zip(items, results, strict=True):
+            if isinstance(result, FunctionNotAvailable | NotSupported):  # a control without it: nothing to name
                 log.info("static read failed machine=%s error=%s", self.machine_id, result)
+            elif isinstance(result, FocasError):  # this session publishes no metric named by it: say so
+                self._count_failure(item.operation, result)
+            else:
+                self._answered(item.operation)
         per_axis = await per_axis_numbers(self.session, self.machine)
         return pl.StaticInfo(self.session.sysinfo, tuple(str(a) for a in axes),
                              tuple(str(s) for s in spindles), per_axis)
@@ -352,6 +358,7 @@ class MachinePoller:
         history: list[AlarmHistoryEntry] | None = None
         last_raw = self._last_raw
         report = self._changes.report
+        failing = self.stats.failing
         # Only the reads whose result is not the very object they gave last time (found in C: most reads
         # of a tick do not move). Errors are new objects every time, alarm history is never kept.
         for index in compress(batch.indices, map(is_not, results, batch.previous(last_raw))):
@@ -363,7 +370,11 @@ class MachinePoller:
             kind = batch.kinds[index]
             if kind is ReadKind.ALARM_HISTORY:
                 history = list(result)
+                if failing:
+                    self._history_answered(read, timestamp, samples)
                 continue
+            if failing and last_raw[position] is _NOTHING:  # the first answer since a failure (or ever)
+                self._answered(pl.drop_key(read.item))
             if result == last_raw[position]:
                 last_raw[position] = result
                 continue  # an equal value decoded anew: nothing this read feeds has moved
@@ -375,8 +386,8 @@ class MachinePoller:
                 sample = report(spec.name, value, spec.type, timestamp)
                 if sample is not None:
                     samples.append(sample)
-        if clock_observed:
-            self._clock_samples(timestamp, samples)
+        if clock_observed or self._clock.news:
+            self._clock.samples(timestamp, mid_mono, self._changes.report, samples)
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
@@ -412,58 +423,69 @@ class MachinePoller:
                  ",".join(sorted(answered)))
         samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
 
-    def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
-        """Feed the tick's clock reading to the tracker; False when it changed nothing about the clock.
-
-        The CNC clock has one-second resolution, so most ticks read the same second again (the client
-        hands it back as the same object): such a reading is converted once and observed only when it
-        tightens the offset interval (ClockTracker.narrows), which after the first seconds is rare.
-        """
-        if result is self._clock_reading:
-            if not self.clock.narrows(self._clock_epoch, mid_mono, half_rtt):
-                return False
-        elif isinstance(result, datetime):
-            self._clock_reading, self._clock_epoch = result, cnc_to_utc_seconds(result, self.clock.zone)
-        else:
-            self._clock_reading = _NOTHING
-            if isinstance(result, FocasError):
-                self.stats.count_error(result)
-            return True
-        steps = self.clock.steps
-        self.clock.observe_epoch(self._clock_epoch, mid_mono, mid_wall, half_rtt)
-        if self.clock.steps != steps:
-            self._log_clock_step()
-        using_gateway = self.clock.use_gateway_time
-        if using_gateway != self._clock_mode_logged:
-            if using_gateway:
-                log.warning("using gateway time machine=%s reason=%s", self.machine_id, self.clock.reason)
-            else:
-                log.info("using CNC time machine=%s skew=%.3fs", self.machine_id, self.clock.skew_s or 0.0)
-            self._clock_mode_logged = using_gateway
+    async def _probe_clock_before(self, next_due: float) -> bool:
+        """Read the clock alone when the tracker wants a reading before the next tick (clock_probe): True
+        when it did. Its time is exact (its own timer, not the shared tick grid); its values wait for the
+        next tick, whose stamps it improved."""
+        half_rtt = self.stats.last_cycle_s / 2
+        send_at = self._clock.probes.send_at(time.monotonic(), half_rtt)
+        if send_at >= self._grid.slot_time(next_due):
+            return False
+        delay = send_at - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        wall_before, mono_before = time.time(), time.monotonic()
+        (result,) = await self.session.batch(PROBE_ITEMS)
+        mono_after, wall_after = time.monotonic(), time.time()
+        self.last_progress = mono_after
+        self.stats.clock_probes += 1
+        self._observe_clock(result, (mono_before + mono_after) / 2, (wall_before + wall_after) / 2,
+                            (mono_after - mono_before) / 2)
+        self._clock.probes.done(mono_after)
+        self._clock.news = True
         return True
 
-    def _log_clock_step(self) -> None:
-        step = self.clock.last_step_s or 0.0
-        follow = ("stamps slow to half speed until they meet it, never earlier than one already sent" if step < 0
-                  else "stamps follow it at once")
-        log.warning("CNC clock stepped machine=%s step=%+.1fs skew=%.1fs: offset re-synced, %s", self.machine_id,
-                    step, self.clock.skew_s or 0.0, follow)
+    def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
+        """Feed a clock answer to the clock (edge.collect.clock_feed); a failed read counts like any function's."""
+        if isinstance(result, FocasError):
+            self._count_failure("ReadClock", result)
+        elif self.stats.failing and self._clock.is_new_reading(result):
+            self._answered("ReadClock")
+        return self._clock.observe(result, mid_mono, mid_wall, half_rtt)
 
-    def _clock_samples(self, timestamp: int, samples: list[Sample]) -> None:
-        skew = self.clock.skew_s
-        report = self._changes.report
-        for sample in (
-            report(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
-                   timestamp, Quality.GOOD if skew is not None else Quality.BAD),
-            report(pl.CLOCK_GATEWAY.name, self.clock.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
-        ):
+    def _count_failure(self, function: str, error: FocasError) -> None:
+        """A failed read of `function`: counted, the last error, and failing until it answers again.
+
+        A function the control does not have is not "failing": it is dropped and listed as such.
+        """
+        self.stats.count_error(function, error)
+        self.last_error = f"{function}: {error}"
+        if isinstance(error, FunctionNotAvailable | NotSupported):
+            self.stats.answered(function)
+        elif self.stats.failed(function, error, time.time()):
+            log.warning("read failing machine=%s function=%s error=%s", self.machine_id, function, error)
+
+    def _answered(self, function: str) -> None:
+        """`function` read fine: if it was failing, say since when and how often."""
+        trouble = self.stats.answered(function)
+        if trouble is not None:
+            log.info("read answers again machine=%s function=%s errors=%d failing_for=%.1fs", self.machine_id,
+                     function, trouble.errors, time.time() - trouble.since)
+
+    def _history_answered(self, read: pl.PlannedRead, timestamp: int, samples: list[Sample]) -> None:
+        """The history read answered: its metric (no value of its own, BAD while it failed) is GOOD again."""
+        function = pl.drop_key(read.item)
+        if function not in self.stats.failing:
+            return
+        self._answered(function)
+        for spec in read.metrics:
+            sample = self._changes.report(spec.name, None, spec.type, timestamp, Quality.GOOD)
             if sample is not None:
                 samples.append(sample)
 
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
-        self.stats.count_error(error)
-        self.last_error = f"{read.item.operation}: {error}"
+        self._count_failure(pl.drop_key(read.item), error)
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = pl.drop_key(read.item)
             if operation not in self._dropped:
@@ -499,6 +521,8 @@ class MachinePoller:
         if isinstance(result, FocasError):
             self._item_failed(reads[0], result, timestamp, samples)
             return []
+        if self.stats.failing:
+            self._answered(pl.drop_key(reads[0].item))
         alarms: list[ActiveAlarm] = list(result)
         samples.extend(self._changes.filter(Sample(spec.name, value, spec.type, timestamp)
                                             for spec, value in pl.metric_values(reads[0], alarms)))

@@ -74,6 +74,9 @@ class HostSettings(BaseModel):
     # EW_SOCKET before the daemon gives up on the request.
     call_timeout_s: float = Field(default=3.0, gt=0)
     connect_timeout_s: float = Field(default=10.0, gt=0)
+    # A request whose call overran answers EW_SOCKET without calling the library for this long (doubling
+    # while it keeps overrunning, 10 min at most), so one hanging function does not stall the others.
+    hung_rest_s: float = Field(default=60.0, gt=0)
     backoff_initial_s: float = Field(default=0.5, gt=0)
     backoff_max_s: float = Field(default=30.0, gt=0)
     socket_mode: int = Field(default=0o660, ge=0, le=0o777)
@@ -93,7 +96,7 @@ class HostSettings(BaseModel):
 
     def timeouts(self) -> WorkerTimeouts:
         return WorkerTimeouts(self.call_timeout_s, self.connect_timeout_s, self.backoff_initial_s,
-                              self.backoff_max_s)
+                              self.backoff_max_s, self.hung_rest_s)
 
 
 def _cnc_address(text: str) -> Address:

@@ -6,6 +6,12 @@ A call that overruns marks that CNC unavailable and abandons its thread (a block
 interrupted; the thread frees its handle and ends if the call ever returns); a fresh thread and a fresh
 handle are opened with backoff. Other CNCs have their own threads and never wait for this one.
 
+A request whose call overran rests: for `hung_rest_s` (doubling while it keeps overrunning, at most
+HUNG_REST_MAX_S) the same request (command and payload) answers EW_SOCKET at once without calling the
+library, so one function that hangs on every call (issue 24: cnc_rdalmhistry3) costs the other reads of its
+CNC one call timeout and one reopen per rest, not per poll, and abandons one blocked thread per rest. The
+first request after the rest is tried for real.
+
 While a CNC is unavailable every request answers EW_SOCKET (-16), which the client reports per item. A
 request whose translation fails in a way no translation expects (a bug, not a CNC answer) is logged with its
 traceback and answers EW_UNEXP (-6); the handle and the connection stay, so the next request is served.
@@ -19,6 +25,7 @@ import ctypes
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +41,7 @@ from edge.fwlib.library import FocasLibrary
 log = logging.getLogger(__name__)
 
 UNAVAILABLE = EW_SOCKET  # the answer for every request while the CNC is unavailable
+HUNG_REST_MAX_S = 600.0  # the longest a command that keeps hanging rests between two real calls
 
 
 class ConnectFailed(Exception):
@@ -58,6 +66,7 @@ class WorkerTimeouts:
     connect_s: float = 10.0
     backoff_initial_s: float = 0.5
     backoff_max_s: float = 30.0
+    hung_rest_s: float = 60.0  # a command whose call overran answers EW_SOCKET without a call this long
 
 
 def _settle(future: asyncio.Future[Any], result: Any, error: BaseException | None) -> None:
@@ -120,6 +129,8 @@ class HandleWorker:
         self._lock = asyncio.Lock()
         self._connector: asyncio.Task[None] | None = None
         self.connects = 0
+        # (command, payload) of a request whose call overran -> (monotonic end of its rest, rest in s)
+        self._resting: dict[tuple[int, bytes], tuple[float, float]] = {}
 
     @property
     def available(self) -> bool:
@@ -150,14 +161,17 @@ class HandleWorker:
     async def respond(self, command: int, payload: bytes) -> bytes:
         async with self._lock:  # one call at a time per handle, each with its own timeout
             cnc, thread = self._cnc, self._thread
-            if cnc is None or thread is None:
+            request = (command, payload)
+            if cnc is None or thread is None or self._rests(request):
                 return error_answer(command, UNAVAILABLE)
             try:
                 reply: bytes = await asyncio.wait_for(thread.submit(lambda: answer(cnc, command, payload)),
                                                       self.timeouts.call_s)
             except TimeoutError:
-                log.error("FOCAS library call overran its timeout; CNC marked unavailable machine=%s "
-                          "command=0x%04X timeout_s=%s", self.target.name, command, self.timeouts.call_s)
+                rest_s = self._rest(request)
+                log.error("FOCAS library call overran its timeout; CNC marked unavailable, the request answers "
+                          "EW_SOCKET without a call for rest_s=%g machine=%s command=0x%04X timeout_s=%s",
+                          rest_s, self.target.name, command, self.timeouts.call_s)
                 self._drop("call timed out")
                 self.start()
                 return error_answer(command, UNAVAILABLE)
@@ -165,12 +179,30 @@ class HandleWorker:
                 log.exception("FOCAS library host could not translate a request; answering EW_UNEXP "
                               "machine=%s command=0x%04X", self.target.name, command)
                 reply = error_answer(command, EW_UNEXP)
+            if self._resting:
+                self._resting.pop(request, None)  # it answered in time: its next overrun rests hung_rest_s again
             if cnc.lost_code:
                 log.warning("FOCAS library lost the CNC handle; reconnecting machine=%s ew=%d",
                             self.target.name, cnc.lost_code)
                 self._drop(f"EW {cnc.lost_code}")
                 self.start()
             return reply
+
+    def _rests(self, request: tuple[int, bytes]) -> bool:
+        """Whether `request` is resting after an overrun (answered EW_SOCKET without a library call)."""
+        resting = self._resting.get(request) if self._resting else None
+        return resting is not None and time.monotonic() < resting[0]
+
+    def _rest(self, request: tuple[int, bytes]) -> float:
+        """Start `request`'s rest after an overrun: hung_rest_s, doubled for each overrun in a row."""
+        now = time.monotonic()
+        for other, (until, _) in list(self._resting.items()):  # forget rests long over (requests not seen since)
+            if now - until > HUNG_REST_MAX_S:
+                del self._resting[other]
+        previous = self._resting.get(request)
+        rest_s = self.timeouts.hung_rest_s if previous is None else min(2 * previous[1], HUNG_REST_MAX_S)
+        self._resting[request] = (now + rest_s, rest_s)
+        return rest_s
 
     def _drop(self, reason: str) -> CallThread | None:
         """Forget the handle and its thread; the thread frees the handle once its current call returns."""

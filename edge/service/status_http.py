@@ -123,8 +123,10 @@ class DaemonCollector:
                                        labels=label)
         skipped = CounterMetricFamily("focas_edge_poll_skipped_ticks", "ticks skipped after an overrun",
                                       labels=label)
-        errors = CounterMetricFamily("focas_edge_cnc_errors", "failed read items by EW code or error class",
-                                     labels=["machine", "code"])
+        errors = CounterMetricFamily("focas_edge_cnc_errors", "failed reads by function and EW code or error "
+                                     "class", labels=["machine", "function", "code"])
+        failing = GaugeMetricFamily("focas_edge_function_failing", "1 while a function's reads fail (until it "
+                                    "answers again)", labels=["machine", "function"])
         skew = GaugeMetricFamily("focas_edge_clock_skew_seconds", "CNC clock minus gateway clock", labels=label)
         cycle = HistogramMetricFamily("focas_edge_poll_cycle_seconds", "wall time of one poll cycle (one "
                                       "batched request)", labels=label)
@@ -134,13 +136,15 @@ class DaemonCollector:
             ticks.add_metric([machine_id], stats.ticks)
             overruns.add_metric([machine_id], stats.overruns)
             skipped.add_metric([machine_id], stats.skipped)
-            for code, count in sorted(stats.item_errors.items()):
-                errors.add_metric([machine_id, code], count)
+            for (function, code), count in sorted(stats.errors.items()):
+                errors.add_metric([machine_id, function, code], count)
+            for function in sorted(stats.failing):
+                failing.add_metric([machine_id, function], 1)
             skew_s = poller.clock.skew_s
             if skew_s is not None:
                 skew.add_metric([machine_id], skew_s)
             cycle.add_metric([machine_id], cycle_histogram(stats.cycle_buckets), stats.cycle_total_s)
-        yield from (connected, ticks, overruns, skipped, errors, skew, cycle)
+        yield from (connected, ticks, overruns, skipped, errors, failing, skew, cycle)
 
     def _publish_metrics(self, publisher: Any) -> Iterable[Metric]:
         counters = dict(publisher.counters)

@@ -74,12 +74,23 @@ def _machine(machine_id: str, poller: Any, meter: RateMeter, now: float) -> dict
         "planned_hz": round(1.0 / poller.machine.poll.periods.status, 2),
         "achieved_hz": None if achieved is None else round(achieved, 2),
         "last_error": poller.last_error,
+        "failing": failing_functions(poller),
         "dropped": poller.dropped,
         "alarms": [{"number": a.number, "type": a.type, "axis": a.axis, "message": a.message}
                    for a in poller.active_alarms],
         "values": [{"name": name, "value": value_text(values[name].value),
                     "quality": values[name].quality.name} for name in shown],
     }
+
+
+def failing_functions(poller: Any) -> list[dict[str, Any]]:
+    """The functions whose reads fail now, with since when and how often (stats.failing)."""
+    return [{"function": function, "since": _iso(trouble.since), "errors": trouble.errors, "error": trouble.error}
+            for function, trouble in sorted(poller.stats.failing.items())]
+
+
+def failing_text(failing: Any) -> str:
+    return f"{failing['function']} failing since {failing['since']} ({failing['errors']} errors): {failing['error']}"
 
 
 def status_document(daemon: DaemonView, meter: RateMeter) -> dict[str, Any]:
@@ -141,7 +152,10 @@ function draw(doc) {
     cell(row, m.alarms.map(a => a.number + " " + a.message).join("\\n") || "none",
       m.alarms.length ? "alarm" : "muted").style.whiteSpace = "pre-line";
     cell(row, m.dropped.join(", ") || "none", m.dropped.length ? "" : "muted");
-    cell(row, m.last_error || "none", m.last_error ? "" : "muted");
+    const failing = m.failing.map(f => f.function + " failing since " + f.since + " (" + f.errors + " errors): "
+      + f.error);
+    cell(row, failing.concat(m.last_error ? [m.last_error] : []).join("\\n") || "none",
+      failing.length ? "down" : (m.last_error ? "" : "muted")).style.whiteSpace = "pre-line";
   }
   updates += 1;
   document.body.dataset.updates = updates;
@@ -156,7 +170,7 @@ refresh();
 """.replace("__REFRESH_MS__", str(REFRESH_MS))
 
 _COLUMNS = ("machine", "CNC session", "series", "status reads achieved / planned", "live values", "active alarms",
-            "dropped functions", "last error")
+            "dropped functions", "failing functions, last error")
 
 
 def _row(machine: Mapping[str, Any]) -> str:
@@ -174,9 +188,17 @@ def _row(machine: Mapping[str, Any]) -> str:
         values,
         f"<span class=\"alarm\">{alarms}</span>" if alarms else "<span class=\"muted\">none</span>",
         e(", ".join(machine["dropped"])) or "<span class=\"muted\">none</span>",
-        e(machine["last_error"]) or "<span class=\"muted\">none</span>",
+        _errors_cell(machine),
     ]
     return f"<tr id=\"machine-{e(machine['id'])}\">" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>"
+
+
+def _errors_cell(machine: Mapping[str, Any]) -> str:
+    e = html.escape
+    lines = [f"<span class=\"down\">{e(failing_text(f))}</span>" for f in machine["failing"]]
+    if machine["last_error"]:
+        lines.append(e(machine["last_error"]))
+    return "<br>".join(lines) or "<span class=\"muted\">none</span>"
 
 
 def render_page(doc: Mapping[str, Any]) -> str:

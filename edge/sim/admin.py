@@ -28,7 +28,7 @@ from typing import Any
 
 from edge.focas.errors import CncError
 from edge.sim.fleet import Fleet, Machine
-from edge.sim.state import ALARM_TYPES
+from edge.sim.state_alarms import ALARM_TYPES
 
 log = logging.getLogger(__name__)
 

@@ -24,7 +24,8 @@ from typing import Any
 from edge.sim.faults import FaultPlan
 from edge.sim.native_server import NativeServer
 from edge.sim.profiles import get_profile
-from edge.sim.state import CycleSpec, MachineState
+from edge.sim.state import MachineState
+from edge.sim.state_program import CycleSpec
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +47,7 @@ class MachineSpec:
     param_write_enabled: bool = False
     macros: dict[int, float | None] = field(default_factory=dict)
     faults: dict[str, Any] = field(default_factory=dict)
+    clock_macro: int | None = None  # a macro that reads as the CNC's clock when it answers (MachineState)
 
 
 class Machine:
@@ -62,6 +64,7 @@ class Machine:
                                   seed=index if spec.seed is None else spec.seed,
                                   start_parts=spec.start_parts)
         self.state.param_write_enabled = spec.param_write_enabled
+        self.state.clock_macro = spec.clock_macro
         for number, value in spec.macros.items():
             self.state.write_macro(number, value, protocol="scenario")
         self.faults = FaultPlan()

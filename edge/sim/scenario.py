@@ -34,7 +34,7 @@ from edge import ConfigError
 from edge.sim.faults import FaultPlan
 from edge.sim.fleet import DEFAULT_ALARM_EVERY, MachineSpec
 from edge.sim.profiles import get_profile
-from edge.sim.state import CycleSpec
+from edge.sim.state_program import CycleSpec
 
 
 class _CycleModel(BaseModel):

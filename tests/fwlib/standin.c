@@ -75,6 +75,10 @@ static int handles_valid[MAX_HANDLES];
 static int refuse_connects;
 static int started_up;
 static int hang_macro = -1;
+static int hang_history;  /* the next this many cnc_rdalmhistryN calls hang (-1: every one) */
+static int fail_history;  /* then the next this many answer fail_history_code */
+static short fail_history_code;
+static int calls_rdalmhistry;
 static volatile int released;
 static int calls_rdpmcrng, calls_wrpmcrng, calls_allclibhndl3;
 static short last_wrpmc_start, last_wrpmc_end;
@@ -91,7 +95,8 @@ void standin_reset(void) {
     n_params = n_macros = n_history = 0;
     memset(pmc, 0, sizeof(pmc));
     pwe = 1; history_version = 4; refuse_connects = 0; hang_macro = -1; released = 0;
-    calls_rdpmcrng = calls_wrpmcrng = calls_allclibhndl3 = calls_rdzofs = 0;
+    hang_history = fail_history = 0; fail_history_code = 0;
+    calls_rdpmcrng = calls_wrpmcrng = calls_allclibhndl3 = calls_rdzofs = calls_rdalmhistry = 0;
     memset(work_offsets, 0, sizeof(work_offsets)); last_rdzofs_length = 0; tool_in_use = 0;
     pthread_mutex_unlock(&lock);
 }
@@ -112,11 +117,17 @@ void standin_set_history_version(int version) { history_version = version; }
 void standin_refuse_connects(int count) { refuse_connects = count; }
 void standin_hang_macro(int number) { hang_macro = number; released = 0; }
 void standin_release(void) { released = 1; }
+/* The next `calls` calls of the history function the control has hang until released (60 s at most), then
+ * answer EW_SOCKET, as a call on a dead connection does; -1 hangs every call. */
+void standin_hang_history(int calls) { hang_history = calls; released = 0; }
+/* The next `calls` calls of the history function answer `code` (after any hangs); -1: every call. */
+void standin_fail_history(short code, int calls) { fail_history_code = code; fail_history = calls; }
 int standin_calls(const char *name) {
     if (!strcmp(name, "pmc_rdpmcrng")) return calls_rdpmcrng;
     if (!strcmp(name, "pmc_wrpmcrng")) return calls_wrpmcrng;
     if (!strcmp(name, "cnc_allclibhndl3")) return calls_allclibhndl3;
     if (!strcmp(name, "cnc_rdzofs")) return calls_rdzofs;
+    if (!strcmp(name, "cnc_rdalmhistry")) return calls_rdalmhistry;  /* of the version the control has */
     return -1;
 }
 void standin_set_work_offset(short number, short axis, long value) {
@@ -304,12 +315,29 @@ short cnc_rdalmhisno(unsigned short h, unsigned short *count) {
     *count = (unsigned short)n_history;
     return EW_OK;
 }
+/* The injected trouble of one history call: 0, or the code it answers (after hanging, when told to). */
+static short history_fault(void) {
+    pthread_mutex_lock(&lock);
+    calls_rdalmhistry++;
+    int hang = hang_history != 0;
+    if (hang_history > 0) hang_history--;
+    short code = 0;
+    if (!hang && fail_history != 0) { code = fail_history_code; if (fail_history > 0) fail_history--; }
+    pthread_mutex_unlock(&lock);
+    if (hang) {
+        for (int i = 0; i < 6000 && !released; i++) { struct timespec t = {0, 10000000}; nanosleep(&t, NULL); }
+        return EW_SOCKET;
+    }
+    return code;
+}
 /* cnc_rdalmhistryN: entries s_no..e_no (1 = newest), at most 10 per call, e_no trimmed to what exists. */
 #define FILL_HISTORY(T, MSGMAX, VERSION, WITH_PATH)                                                    \
     short cnc_rdalmhistry##VERSION(unsigned short h, unsigned short s, unsigned short e,              \
                                    unsigned short length, T *out) {                                  \
         CHECK_HANDLE(h);                                                                             \
         if (history_version < VERSION) return EW_FUNC;                                               \
+        short fault = history_fault();                                                               \
+        if (fault) return fault;                                                                     \
         if (length != sizeof(T)) return EW_LENGTH;                                                   \
         if (s < 1 || e < s || e - s >= 10) return EW_NUMBER;                                         \
         pthread_mutex_lock(&lock);                                                                   \

@@ -86,6 +86,8 @@ class Standin:
         self.lib.standin_set_work_offset.argtypes = [ctypes.c_short, ctypes.c_short, ctypes.c_long]
         self.lib.standin_last_rdzofs_length.restype = ctypes.c_short
         self.lib.standin_set_tool.argtypes = [ctypes.c_long]
+        self.lib.standin_hang_history.argtypes = [ctypes.c_int]
+        self.lib.standin_fail_history.argtypes = [ctypes.c_short, ctypes.c_int]
         self.lib.standin_reset()
 
     def layout_rows(self) -> list[tuple[str, str, int, int]]:

@@ -24,7 +24,7 @@ from edge.focas.frame import Frame, FrameDecoder, decode_response_body, encode_o
 from edge.focas.model import DIAG_TYPE_CODES, ParamType, PmcType
 from edge.sim.fleet import Fleet, MachineSpec
 from edge.sim.profiles import PROFILES
-from edge.sim.state import CycleSpec
+from edge.sim.state_program import CycleSpec
 from tests.helpers import wait_for
 
 pytestmark = pytest.mark.integration

@@ -21,7 +21,7 @@ import pytest
 
 from edge.focas import items as it
 from edge.focas import packed as pk
-from edge.focas.errors import AccessDenied, CncError, OutOfRange
+from edge.focas.errors import AccessDenied, Busy, CncError, FunctionNotAvailable, OutOfRange
 from edge.focas.model import ModalGCode
 from edge.focas.packed.client import PackedClient
 from edge.focas.packed.frame import FrameDecoder, PackedFrame
@@ -176,13 +176,28 @@ async def test_the_newest_history_call_the_control_has_is_chosen(
     assert entry.message == "M" * kept
 
 
-async def test_a_control_without_history_answers_an_empty_list_not_an_error(
-        standin: Standin, host: FwlibHost) -> None:
+async def test_a_control_without_history_is_the_seeds_empty_list_and_the_clients_ew_func(
+        standin: Standin, host: FwlibHost, cnc: PackedClient) -> None:
     standin.set_history_version(0)
     standin.push_alarm((2026, 3, 1, 8, 0, 0), 7, b"X")
     payload = await raw_call(host, pk.Command.RDALMHISTRY, struct.pack("<h", 10))
     assert struct.unpack("<h", payload) == (-1,)  # num_alm = -EW_FUNC
-    assert pk.decode_alarm_history(payload) == []
+    assert pk.decode_alarm_history(payload) == []  # the seed's codec rule
+    with pytest.raises(FunctionNotAvailable):  # the client says why: the poller drops it, listed as such
+        await cnc.read_alarm_history(10)
+
+
+@pytest.mark.parametrize(("code", "kind"), [(-1, Busy), (-16, CncError), (5, CncError), (3, OutOfRange)])
+async def test_a_history_call_the_library_refuses_is_that_error_at_the_client_not_an_empty_list(
+        standin: Standin, host: FwlibHost, cnc: PackedClient, code: int, kind: type[CncError]) -> None:
+    standin.set_history_version(3)
+    standin.push_alarm((2026, 3, 1, 8, 0, 0), 7, b"X")
+    standin.fail_history(code, 1)
+    with pytest.raises(kind) as caught:
+        await cnc.read_alarm_history(10)
+    assert caught.value.code == code  # library-side (negative) codes too: -1 is EW_BUSY, not EW_FUNC
+    await asyncio.wait_for(host.workers["mill-1"].wait_available(), 10)  # EW_SOCKET: the handle is reopened
+    assert [e.alm_no for e in await cnc.read_alarm_history(10)] == [7]  # and the next call answers
 
 
 # ---- parameters, macros, PMC -----------------------------------------------------------------------------
@@ -277,6 +292,31 @@ async def test_a_hung_call_marks_only_that_cnc_unavailable(standin: Standin, hos
         await asyncio.wait_for(host.workers["mill-1"].wait_available(), 10)
         assert host.workers["mill-1"].connects == 2  # a fresh handle on a fresh thread, the old one still hung
         assert await hung.read_macros(100) == [7.0]
+
+
+async def test_a_history_call_that_hangs_rests_while_the_other_reads_of_its_cnc_go_on(
+        standin: Standin, host: FwlibHost, cnc: PackedClient) -> None:
+    """Issue 24's stand-in: cnc_rdalmhistry3 hangs on every call. It is bounded by the call timeout (2 s
+    here), answers EW_SOCKET, and then rests (hung_rest_s, 60 s by default): answered at once without a
+    library call, so the CNC's other reads are not held up by it again and no second thread is abandoned."""
+    standin.set_history_version(3)
+    standin.push_alarm((2026, 3, 1, 8, 0, 0), 7, b"X")
+    await cnc.write_macro(100, 3.0)
+    standin.hang_history(-1)
+    started = time.monotonic()
+    with pytest.raises(CncError) as caught:
+        await cnc.read_alarm_history(10)
+    assert caught.value.code == EW_SOCKET
+    assert time.monotonic() - started < 5  # the 2 s call timeout, not the stand-in's 60 s hang
+    worker = host.workers["mill-1"]
+    await asyncio.wait_for(worker.wait_available(), 10)
+    assert await cnc.read_macros(100) == [3.0]
+    calls, connects = standin.calls("cnc_rdalmhistry"), worker.connects
+    started = time.monotonic()
+    results = await cnc.batch([it.ReadAlarmHistory(10), it.ReadMacros(100, 100), it.ReadAlarmHistory(10)])
+    assert time.monotonic() - started < 1.0  # no call timeout waited for
+    assert [getattr(r, "code", r) for r in results] == [EW_SOCKET, [3.0], EW_SOCKET]
+    assert (standin.calls("cnc_rdalmhistry"), worker.connects) == (calls, connects)  # the library was not asked
 
 
 async def test_a_lost_handle_is_reopened(standin: Standin, host: FwlibHost, cnc: PackedClient) -> None:

@@ -89,7 +89,8 @@ async def test_healthz_and_metrics_follow_the_live_state(mosquitto: Mosquitto, t
             assert got[("focas_edge_poll_cycle_seconds_count", (("machine", "m1"),))] >= 3
             assert got[("focas_edge_poll_cycle_seconds_bucket", (("le", "+Inf"), ("machine", "m1")))] == \
                 got[("focas_edge_poll_cycle_seconds_count", (("machine", "m1"),))]
-            assert got[("focas_edge_cnc_errors_total", (("code", "EW_NOOPT"), ("machine", "m2")))] >= 1
+            assert got[("focas_edge_cnc_errors_total",
+                        (("code", "EW_NOOPT"), ("function", "ReadMacros"), ("machine", "m2")))] >= 1
             assert 4.0 < got[("focas_edge_clock_skew_seconds", (("machine", "m1"),))] < 6.0
             assert got[("focas_edge_mqtt_messages_total", (("outcome", "published"),))] > 0
             assert ("focas_edge_poll_overruns_total", (("machine", "m2"),)) in got

@@ -24,13 +24,15 @@ from edge.cli.views.watch import Watcher
 from edge.config import Config, MachineConfig, load_config
 from edge.service.daemon import Daemon
 from edge.service.logformat import configure_logging
-from edge.sim.fleet import Fleet, MachineSpec
-from edge.sim.state import CycleSpec
+from edge.sim import CycleSpec, Fleet, MachineSpec
 
 log = logging.getLogger("edge.cli.views.demo")
 
 PROFILES = ("30i", "16i", "0i-F")
 MULTI_PATH_PROFILE = "31i-2p"  # for a machine configured with paths: 2 (a twin-turret lathe)
+
+
+NDEATH_WAIT_S = 3.0
 
 
 def broker_answers(host: str, port: int) -> bool:
@@ -128,6 +130,8 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
     try:
         code = await daemon.run()
     finally:
+        if mqtt.sparkplug is not None:  # let the watcher print the NDEATH the daemon just sent
+            await asyncio.to_thread(watcher.node_death_seen.wait, NDEATH_WAIT_S)
         if drawing is not None and view is not None:
             drawing.cancel()
             view.draw()

@@ -47,7 +47,7 @@ def machine_line(machine: dict[str, Any], width: int) -> str:
 class LiveView:
     """Draws the daemon's machines and the event tail to `out` every `interval` seconds."""
 
-    def __init__(self, daemon: DaemonView, out: TextIO | None = None, tail: int = 8,
+    def __init__(self, daemon: DaemonView, out: TextIO | None = None, tail: int = 12,
                  is_tty: bool | None = None, clock: Callable[[], float] = time.time) -> None:
         self.daemon = daemon
         self.out = out or sys.stdout
@@ -58,26 +58,29 @@ class LiveView:
         self._clock = clock
         self._drawn_lines = 0
         self._last_block: list[str] = []
-        self._last_topic = ""  # the topic of the tail's last event, and how many in a row it stands for
-        self._repeats = 0
+        self._repeats: dict[str, int] = {}  # topic -> how many events its one tail line stands for
 
     def on_line(self, line: str) -> None:
         """A decoded line from the watcher (its MQTT thread): counted, and kept if it is an event.
 
-        A run of events on one topic (an alarm-history backlog, say) takes one line with a count, so a
-        burst never pushes the births out of the tail.
+        Events on a topic already in the tail (an alarm-history backlog, say, even interleaved with other
+        machines' backlogs) take that topic's one line, moved to the end with a count, so bursts never
+        push the births out of the tail.
         """
         self.messages += 1
         if not is_event(line):
             return
         stamp = time.strftime("%H:%M:%S ", time.localtime(self._clock()))
         topic = event_topic(line)
-        if self.events and self._last_topic == topic:
-            self._repeats += 1
-            self.events[-1] = f"{stamp}{line}  (x{self._repeats} on this topic)"
-            return
-        self._last_topic, self._repeats = topic, 1
+        repeats = self._repeats.get(topic, 0) + 1
+        if repeats > 1:
+            self.events = deque((e for e in self.events if event_topic(e.split(" ", 1)[1]) != topic),
+                                maxlen=self.events.maxlen)
+            line = f"{line}  (x{repeats} on this topic)"
+        if self.events.maxlen is not None and len(self.events) == self.events.maxlen:
+            self._repeats.pop(event_topic(self.events[0].split(" ", 1)[1]), None)
         self.events.append(stamp + line)
+        self._repeats[topic] = repeats
 
     def block(self) -> list[str]:
         doc = status_document(self.daemon, self._meter)

@@ -111,6 +111,7 @@ class Watcher:
         self.decoder = SparkplugDecoder()
         self._lock = threading.Lock()
         self.count = 0
+        self.node_death_seen = threading.Event()  # the demo waits for the daemon's NDEATH before it stops
         self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"focas-edge-watch-{id(self):x}")
         self.client.on_connect = lambda client, *_: client.subscribe([(t, 0) for t in self.topics])
         self.client.on_message = self._on_message
@@ -128,6 +129,8 @@ class Watcher:
 
     def _on_message(self, client: paho.Client, userdata: object, msg: paho.MQTTMessage) -> None:
         data = bytes(msg.payload)
+        if "/NDEATH/" in msg.topic:
+            self.node_death_seen.set()
         if msg.topic.startswith("spBv1.0/"):
             lines = self.decoder.lines(msg.topic, data)
             if not self.show_births and lines and "BIRTH" in lines[0][:7]:

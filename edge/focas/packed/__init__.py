@@ -10,7 +10,8 @@ reversed. docs/packed-protocol.md has a byte table for every layout.
 
 Reads defined by this project (the seed only names them) answer ``i16 status`` first, then the body when
 status is 0. Writes answer exactly one ``i16 status`` (seed). ODBALMHIS (0x0F1A) answers ``num_alm``
-first, negative meaning a CNC error, and its decoder never raises.
+first, negative meaning a CNC error, and its decoder never raises (the seed's empty list); the client reads
+it through decode_alarm_history_response, which raises that error instead.
 
 What lives here, by area (this package's ``__all__`` is the codecs' contract; import them from here):
 
@@ -39,17 +40,22 @@ from __future__ import annotations
 from edge.focas.packed.alarms import (
     ALMHIS_MAX_DEPTH,
     ALMHIS_MIN_DEPTH,
+    LIBRARY_STATUS_OFFSET,
+    AlarmHistoryAnswer,
     AlarmHistoryRow,
+    alarm_history_status,
     almhis_padding,
     clamp_depth,
     decode_alarm_history,
     decode_alarm_history_request,
+    decode_alarm_history_response,
     decode_alarm_messages_response,
     encode_alarm_history,
     encode_alarm_history_error,
     encode_alarm_history_request,
     encode_alarm_history_rows,
     encode_alarm_messages,
+    parse_alarm_history,
 )
 from edge.focas.packed.commands import (
     FOCAS_NAMES,
@@ -142,6 +148,7 @@ __all__ = [
     "G_CODE_WIDTH",
     "I32_MAX",
     "I32_MIN",
+    "LIBRARY_STATUS_OFFSET",
     "ODBM_LENGTH",
     "PACKED_EW_PASSWD",
     "PARAM_WIDTHS",
@@ -152,17 +159,20 @@ __all__ = [
     "POSITION_KINDS_BY_CODE",
     "RESERVED_IDS",
     "VACANT",
+    "AlarmHistoryAnswer",
     "AlarmHistoryRow",
     "CncStatus",
     "Command",
     "ParamWrite",
     "PmcCodeError",
     "PmcRange",
+    "alarm_history_status",
     "almhis_padding",
     "clamp_depth",
     "command_name",
     "decode_alarm_history",
     "decode_alarm_history_request",
+    "decode_alarm_history_response",
     "decode_alarm_messages_response",
     "decode_axis_names_response",
     "decode_clock_response",
@@ -218,6 +228,7 @@ __all__ = [
     "encode_timer",
     "from_scaled",
     "param_width",
+    "parse_alarm_history",
     "pmc_type_a",
     "pmc_values",
     "read_response",

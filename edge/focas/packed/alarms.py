@@ -1,7 +1,12 @@
 """Alarms on the packed surface: the history (ODBALMHIS, 0x0F1A) and the active alarms (0x4004).
 
-ODBALMHIS answers ``num_alm`` first, negative meaning a CNC error, and its decoder never raises (seed);
-the active-alarm read is ours and answers the status word first like every other read we define.
+ODBALMHIS answers ``num_alm`` first, negative meaning a CNC error, and its decoder never raises (seed):
+`decode_alarm_history` turns an error into an empty list. A caller must not take that list for "no
+history", so `parse_alarm_history` walks the same answer and says what the list cannot: the status a
+negative num_alm carries, and whether the list ended early. The client reads history through
+`decode_alarm_history_response`, which raises those as errors, so a failing history read is a counted
+error of that function rather than an empty list (issue 24). The active-alarm read is ours and answers
+the status word first like every other read we define.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from datetime import UTC, datetime
 
 from edge.focas.errors import ProtocolError
 from edge.focas.model import ActiveAlarm, AlarmHistoryEntry
-from edge.focas.packed.commands import I16, Command, body_after_status
+from edge.focas.packed.commands import I16, Command, body_after_status, status_error
 
 # ---- ODBALMHIS (0x0F1A) --------------------------------------------------------------------------------
 # Request: i16 depth, clamped to 1..250. Response: i16 num_alm (< 0: CNC error), then num_alm entries of
@@ -82,40 +87,101 @@ def encode_alarm_history_rows(rows: Sequence[AlarmHistoryRow]) -> bytes:
     return b"".join(blocks)
 
 
+# A server's error travels as a negative num_alm. The CNC's own codes (positive EW_*) as -status, as the
+# seed's "< 0 is a CNC error" and docs/packed-protocol.md §3.1 say (EW_FUNC -> -1); the library-side codes
+# (negative EW_*: EW_SOCKET, EW_HANDLE, EW_BUSY ...) as status - LIBRARY_STATUS_OFFSET (EW_SOCKET -> -1016),
+# so the two cannot be mistaken for each other (-1 would otherwise be EW_FUNC and EW_BUSY at once).
+LIBRARY_STATUS_OFFSET = 1000
+
+
 def encode_alarm_history_error(status: int) -> bytes:
-    """A CNC error on 0x0F1A: num_alm = -status (any negative means error; the client sees none)."""
-    return I16.pack(-abs(status) or -1)
+    """A CNC error on 0x0F1A as a negative num_alm that `alarm_history_status` turns back into `status`."""
+    if status < 0:
+        return I16.pack(max(status - LIBRARY_STATUS_OFFSET, -32768))
+    return I16.pack(-min(status, 32767) or -1)
 
 
-def decode_alarm_history(payload: bytes) -> list[AlarmHistoryEntry]:
+def alarm_history_status(num_alm: int) -> int:
+    """The EW status a num_alm carries: 0 for a count (>= 0), else the code encode_alarm_history_error sent."""
+    if num_alm >= 0:
+        return 0
+    if num_alm < -LIBRARY_STATUS_OFFSET:
+        return num_alm + LIBRARY_STATUS_OFFSET
+    return -num_alm
+
+
+@dataclass(frozen=True, slots=True)
+class AlarmHistoryAnswer:
+    """One ODBALMHIS answer walked in full: the entries, and what the seed's list leaves unsaid.
+
+    status: the EW code of a negative num_alm (0 when it is a count); announced: num_alm itself;
+    truncated: the payload is too short for num_alm's entries (or for num_alm), so the list ended early;
+    skipped: entries dropped for an impossible date (the seed's rule: no stable key can be made for them).
+    """
+
+    entries: list[AlarmHistoryEntry]
+    status: int = 0
+    announced: int = 0
+    truncated: bool = False
+    skipped: int = 0
+
+
+def parse_alarm_history(payload: bytes) -> AlarmHistoryAnswer:
     """The seed's error rules, and never an exception on a bad payload.
 
-    num_alm < 0 -> empty list; a malformed timestamp skips that entry only; an entry whose header or
-    message runs past the payload (or has a negative msg_len) ends the list there. A final entry whose
-    padding is missing is kept.
+    num_alm < 0 -> no entries (its status kept); a malformed timestamp skips that entry only; an entry
+    whose header or message runs past the payload (or has a negative msg_len) ends the list there
+    (truncated). A final entry whose padding is missing is kept.
     """
     if len(payload) < 2:
-        return []
+        return AlarmHistoryAnswer([], truncated=True)
     (num_alm,) = I16.unpack_from(payload)
+    if num_alm < 0:
+        return AlarmHistoryAnswer([], alarm_history_status(num_alm), num_alm)
     entries: list[AlarmHistoryEntry] = []
     offset = 2
-    for _ in range(max(0, num_alm)):
+    skipped = 0
+    for _ in range(num_alm):
         if offset + _ALMHIS_ENTRY.size > len(payload):
-            break
+            return AlarmHistoryAnswer(entries, 0, num_alm, True, skipped)
         year, month, day, hour, minute, second, axis_no, alm_type, alm_no, msg_len = (
             _ALMHIS_ENTRY.unpack_from(payload, offset)
         )
         text_at = offset + _ALMHIS_ENTRY.size
         if msg_len < 0 or text_at + msg_len > len(payload):
-            break
+            return AlarmHistoryAnswer(entries, 0, num_alm, True, skipped)
         message = payload[text_at : text_at + msg_len].decode("ascii", errors="replace")
         offset = text_at + msg_len + almhis_padding(msg_len)
         try:
             occurred = datetime(year, month, day, hour, minute, second, tzinfo=UTC)
         except ValueError:
+            skipped += 1
             continue
         entries.append(AlarmHistoryEntry(occurred, axis_no, alm_type, alm_no, message))
-    return entries
+    return AlarmHistoryAnswer(entries, 0, num_alm, False, skipped)
+
+
+def decode_alarm_history(payload: bytes) -> list[AlarmHistoryEntry]:
+    """The seed's decoder: the entries of `parse_alarm_history`, so an error or a short payload is []."""
+    return parse_alarm_history(payload).entries
+
+
+def decode_alarm_history_response(payload: bytes) -> list[AlarmHistoryEntry]:
+    """The client's read of 0x0F1A: the entries, or the error the seed's decoder would hide.
+
+    A negative num_alm raises its typed CncError (EW_SOCKET while the library host's CNC is unavailable,
+    FunctionNotAvailable for a control without history ...); a payload too short for what num_alm
+    announced raises ProtocolError, since publishing the entries that did arrive would move the history
+    watermark past the ones that did not.
+    """
+    answer = parse_alarm_history(payload)
+    error = status_error(answer.status, Command.RDALMHISTRY)
+    if error is not None:
+        raise error
+    if answer.truncated:
+        raise ProtocolError(f"cnc_rdalmhistry: {len(payload)}-byte answer ends before the {answer.announced} "
+                            f"entries its num_alm announces")
+    return answer.entries
 
 
 # ---- active alarms (0x4004) ----------------------------------------------------------------------------

@@ -186,7 +186,8 @@ def plan_item(item: it.ReadItem) -> ItemPlan:
         case it.ReadWorkOffsets(number=number):
             return _single(C.RDZOFS, pk.encode_i16(number), pk.decode_work_offsets_response)
         case it.ReadAlarmHistory(depth=depth):
-            return _single(C.RDALMHISTRY, pk.encode_alarm_history_request(depth), pk.decode_alarm_history)
+            return _single(C.RDALMHISTRY, pk.encode_alarm_history_request(depth),
+                           pk.decode_alarm_history_response)
     raise NotSupported(item.operation, "the packed surface has no command id for it")
 
 

@@ -45,7 +45,8 @@ def error_status(error: CncError | ProtocolError) -> int:
 
 
 def error_answer(command: int, status: int) -> bytes:
-    """The response payload carrying a failure: num_alm = -status for ODBALMHIS, else a lone i16 status."""
+    """The response payload carrying a failure: ODBALMHIS's negative num_alm (encode_alarm_history_error),
+    else a lone i16 status."""
     if command == pk.Command.RDALMHISTRY:
         return pk.encode_alarm_history_error(status)
     return pk.encode_status(status)

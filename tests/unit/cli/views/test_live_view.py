@@ -67,3 +67,19 @@ def test_a_burst_on_one_topic_takes_one_line_so_births_stay_in_the_tail() -> Non
     assert tail == ["DBIRTH gw/m1 seq=1 (30 metrics)",
                     "JSON   focas/m1/events/alarm = {\"number\": 39}  (x40 on this topic)",
                     "DBIRTH gw/m2 seq=2 (31 metrics)"]
+
+
+def test_interleaved_bursts_of_several_machines_keep_every_birth_in_the_tail() -> None:
+    view = LiveView(daemon=None, out=io.StringIO(), is_tty=False, clock=lambda: 0.0)  # type: ignore[arg-type]
+    machines = ["m1", "m2", "m3", "m4"]
+    view.on_line("NBIRTH gw seq=0 (12 metrics)")
+    for m in machines:
+        view.on_line(f"DBIRTH gw/{m} seq=1 (30 metrics)")
+    for n in range(40):  # every machine's alarm-history backlog at once, interleaved
+        for m in machines:
+            view.on_line(f"JSON   focas/{m}/events/alarm = {{\"number\": {n}}}")
+    tail = [e.split(" ", 1)[1] for e in view.events]
+    assert [line for line in tail if line.startswith("DBIRTH")] == [f"DBIRTH gw/{m} seq=1 (30 metrics)"
+                                                                     for m in machines]
+    assert tail[-1] == "JSON   focas/m4/events/alarm = {\"number\": 39}  (x40 on this topic)"
+    assert len(tail) == 9

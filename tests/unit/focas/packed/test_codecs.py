@@ -228,6 +228,50 @@ def test_history_error_response_is_a_negative_count() -> None:
     assert pk.decode_alarm_history(pk.encode_alarm_history_error(6)) == []
 
 
+# ---- ODBALMHIS errors at the client: the status the seed's empty list hides (issue 24) ----------------------
+@pytest.mark.parametrize(("status", "num_alm"), [(1, -1), (6, -6), (17, -17), (21, -21), (-1, -1001),
+                                                 (-8, -1008), (-16, -1016), (-17, -1017)])
+def test_history_error_status_travels_in_num_alm_both_signs_apart(status: int, num_alm: int) -> None:
+    wire = pk.encode_alarm_history_error(status)
+    assert wire == struct.pack("<h", num_alm)
+    assert pk.alarm_history_status(num_alm) == status
+    assert pk.decode_alarm_history(wire) == []  # the seed's rule holds for every one of them
+    assert pk.parse_alarm_history(wire) == pk.AlarmHistoryAnswer([], status, num_alm)
+
+
+@pytest.mark.parametrize(("num_alm", "kind", "code"), [
+    (-16, CncError, 16),  # a foreign server's -16: the CNC's code 16 (-status, as the seed's surface says)
+    (-1016, CncError, -16),  # ours: EW_SOCKET, the library host's "CNC unavailable" (a call that hung)
+    (-1, FunctionNotAvailable, 1),
+    (-1001, CncError, -1),
+    (-3, OutOfRange, 3),
+    (-11, AccessDenied, 17),
+    (-32768, CncError, -31768),
+])
+def test_history_negative_num_alm_raises_its_error_at_the_client(num_alm: int, kind: type[CncError],
+                                                                 code: int) -> None:
+    wire = struct.pack("<h", num_alm) + entry_bytes(2026, 1, 1, 0, 0, 0, 0, 1, 2, b"X")
+    with pytest.raises(kind) as caught:
+        pk.decode_alarm_history_response(wire)
+    assert caught.value.code == code and caught.value.function == "cnc_rdalmhistry"
+
+
+@pytest.mark.parametrize("payload", ["", "01", "0100", "0300" + "00" * 20, "0100ea07"])
+def test_history_answer_shorter_than_its_num_alm_is_a_protocol_error_at_the_client(payload: str) -> None:
+    assert pk.parse_alarm_history(h(payload)).truncated
+    with pytest.raises(ProtocolError, match="cnc_rdalmhistry"):
+        pk.decode_alarm_history_response(h(payload))
+
+
+def test_history_client_decoder_keeps_the_seeds_entries_and_bad_date_rule() -> None:
+    wire = (h("0300") + entry_bytes(2026, 3, 1, 8, 0, 0, 1, 2, 100, b"FIRST")
+            + entry_bytes(2026, 13, 1, 0, 0, 0, 0, 2, 200, b"BAD")
+            + entry_bytes(2026, 3, 1, 6, 0, 0, 0, 3, 300, b"THIRD"))
+    assert pk.decode_alarm_history_response(wire) == pk.decode_alarm_history(wire)
+    assert pk.parse_alarm_history(wire).skipped == 1
+    assert pk.decode_alarm_history_response(h("0000")) == []
+
+
 # ---- IODBPSD (0x0102 write, 0x0002/0x0004 read) ---------------------------------------------------------
 @pytest.mark.parametrize(
     ("ptype", "value", "wire"),

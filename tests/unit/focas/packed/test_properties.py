@@ -62,6 +62,29 @@ def test_property_history_truncated_payload_keeps_a_prefix(entries: list[AlarmHi
     assert decoded == entries[: len(decoded)]
 
 
+@given(st.binary(max_size=600))
+def test_property_history_client_decoder_is_the_seeds_list_or_says_why_not(payload: bytes) -> None:
+    try:
+        entries = pk.decode_alarm_history_response(payload)
+    except (ProtocolError, CncError):
+        answer = pk.parse_alarm_history(payload)
+        assert answer.status or answer.truncated
+    else:
+        assert entries == pk.decode_alarm_history(payload)
+
+
+@given(st.lists(history_entries, min_size=1, max_size=8), st.data())
+def test_property_history_client_decoder_never_hands_on_a_cut_list(entries: list[AlarmHistoryEntry],
+                                                                   data: st.DataObject) -> None:
+    wire = pk.encode_alarm_history(entries)
+    cut = data.draw(st.integers(0, len(wire) - 1))
+    try:
+        decoded = pk.decode_alarm_history_response(wire[:cut])
+    except ProtocolError:
+        return
+    assert decoded == entries  # only a cut inside the last entry's padding leaves every entry whole
+
+
 # ---- framing ---------------------------------------------------------------------------------------------
 @given(st.lists(st.binary(max_size=64), max_size=20))
 def test_property_frame_decoder_only_raises_protocol_error(chunks: list[bytes]) -> None:
@@ -121,6 +144,7 @@ RESPONSE_DECODERS = [
     lambda p: pk.decode_float_response(p, pk.Command.ACTF),
     lambda p: pk.decode_floats_response(p, pk.Command.POSITION),
     lambda p: pk.decode_status(p, pk.Command.WRPARAM),
+    pk.decode_alarm_history_response,
 ]
 REQUEST_DECODERS = [
     pk.decode_param_write,

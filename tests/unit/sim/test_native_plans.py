@@ -31,11 +31,14 @@ from edge.focas.frame import (
 from edge.focas.functions import Context
 from edge.focas.model import PmcType
 from edge.focas.values import SlotForm, encode_scaled
-from edge.sim import native_server as ns
+from edge.sim import native_plans as ns  # the fast path's caches live in native_plans
 from edge.sim.faults import FaultPlan
-from edge.sim.native_server import HANDLERS, NativeServer, answer_subpacket, scaled_bytes
+from edge.sim.native_handlers import HANDLERS, answer_subpacket
+from edge.sim.native_plans import scaled_bytes
+from edge.sim.native_server import NativeServer
 from edge.sim.profiles import PROFILES, get_profile
-from edge.sim.state import CycleSpec, MachineState
+from edge.sim.state import MachineState
+from edge.sim.state_program import CycleSpec
 
 T0 = 1_750_000_000.0
 CYCLE = CycleSpec(cut_seconds=10.0, idle_seconds=5.0, alarm_every=2, alarm_seconds=3.0)
@@ -345,7 +348,7 @@ def test_any_request_answers_the_reference_bytes(profile: str, requests: list[Re
 def test_the_fast_path_gives_ew_number_for_a_value_the_wire_cannot_carry() -> None:
     twins = Twins("30i").at(0.0)
     for machine in (twins.fast, twins.reference):
-        machine._macros[501] = math.inf  # only possible from inside: write_macro refuses it
+        machine._macros.values[501] = math.inf  # only possible from inside: write_macro refuses it
     reply = twins.assert_same([fn.read_macros_request(500, 502)])
     assert isinstance(reply, bytes)
     assert decode_response_body(decode_frame(reply).body)[0].rc == EW_NUMBER
