@@ -46,14 +46,19 @@ install -m 0640 config/single-machine.yaml "$stage/etc/focas-edge/edge.yaml"
 install -m 0644 LICENSE "$stage/usr/share/doc/focas-edge/copyright"
 install -m 0644 docs/install.md "$stage/usr/share/doc/focas-edge/"
 
-python_dep=$("$python" -c 'import sys; print("python%d.%d" % sys.version_info[:2])')
+# The venv runs on the python3 it was made with (bin/python -> /usr/bin/python3, lib/python3.N/): Debian's
+# python3 of that minor version, which brings libpython3.N-stdlib (sqlite3, ssl). The wheels' own C parts
+# (pydantic-core, PyYAML, protobuf) need only libc. procps: the unit's ExecReload=/bin/kill. ca-certificates:
+# the system CAs, for a TLS broker without ca_file.
+python_dep=$("$python" -c 'import sys; v = sys.version_info; print(f"python3 (>= {v[0]}.{v[1]}), python3 (<< {v[0]}.{v[1] + 1})")')
 size=$(du -sk --exclude=DEBIAN "$stage" | cut -f1)
 cat > "$stage/DEBIAN/control" <<CONTROL
 Package: focas-edge
 Version: $version
 Architecture: $arch
 Maintainer: focas-edge maintainers <focas-edge@users.noreply.github.com>
-Depends: $python_dep, adduser
+Depends: $python_dep, adduser, procps
+Recommends: ca-certificates
 Installed-Size: $size
 Section: net
 Priority: optional

@@ -1,17 +1,19 @@
 #!/usr/bin/env bash
-# Build (once) a minimal Debian bookworm root for ARCH under DIR, cached: a second call returns at once.
-# Used by `make systemd-check` (amd64, booted with systemd-nspawn) and `make arm64-check` (arm64 under
-# qemu-user-static). The mirror is the one this machine's apt uses.
+# Build (once) a minimal Debian bookworm root for ARCH under DIR (debootstrap --variant=minbase) with the
+# comma-separated PACKAGES on top, cached: a second call with the same packages returns at once.
+#   make systemd-check: amd64 with only systemd (no python3, no adduser: the .deb's Depends must bring them)
+#   make arm64-check:   arm64 with what building the .deb inside needs (the default PACKAGES)
+# The mirror is the one this machine's apt uses.
 set -euo pipefail
-arch=${1:?usage: debian-root.sh ARCH DIR}
-dir=${2:?usage: debian-root.sh ARCH DIR}
+arch=${1:?usage: debian-root.sh ARCH DIR [PACKAGES]}
+dir=${2:?usage: debian-root.sh ARCH DIR [PACKAGES]}
+packages=${3:-python3,python3-venv,mosquitto,adduser,procps,ca-certificates}
 mirror=${DEBIAN_MIRROR:-$(grep -rhoE '^URIs: *http[^ ]*/debian$' /etc/apt/sources.list.d/ 2>/dev/null | head -1 | awk '{print $2}')}
 mirror=${mirror:-http://deb.debian.org/debian}
-packages=python3,python3-venv,mosquitto,adduser,procps,ca-certificates
-[[ $arch == amd64 ]] && packages=$packages,systemd,systemd-sysv,dbus
+stamp="$arch bookworm minbase $packages"
 
-if [[ -f $dir/.complete ]]; then
-    echo "debian-root: cached $arch root at $dir"
+if [[ -f $dir/.complete && $(cat "$dir/.complete") == "$stamp" ]]; then
+    echo "debian-root: cached $arch root at $dir ($packages)"
     exit 0
 fi
 command -v debootstrap >/dev/null \
@@ -21,6 +23,6 @@ if [[ $arch != "$(dpkg --print-architecture)" ]]; then
 fi
 rm -rf "$dir"
 mkdir -p "$(dirname "$dir")"
-echo "debian-root: debootstrap $arch bookworm from $mirror into $dir (a few minutes, once)"
+echo "debian-root: debootstrap $arch bookworm from $mirror into $dir with $packages (a few minutes, once)"
 debootstrap --arch="$arch" --variant=minbase --include="$packages" bookworm "$dir" "$mirror"
-touch "$dir/.complete"
+echo "$stamp" > "$dir/.complete"

@@ -1,7 +1,10 @@
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -27,3 +30,13 @@ def mosquitto() -> Iterator[Mosquitto]:
         yield broker
     finally:
         broker.close()
+
+
+@pytest.fixture
+def open_dir() -> Iterator[Path]:
+    """A directory any user can enter (pytest's tmp_path is 0700, which would hide everything in it from the
+    other user a test runs a command as), removed afterwards."""
+    path = Path(tempfile.mkdtemp(prefix="focas-edge-test-"))
+    path.chmod(0o755)
+    yield path
+    shutil.rmtree(path)

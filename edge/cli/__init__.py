@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from edge import __version__
@@ -27,6 +28,7 @@ __all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "SUBCOMMANDS", "build_parser
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
+EXIT_BROKEN_PIPE = 141  # what a shell reports for a command killed by SIGPIPE
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,16 +54,33 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    configure_logging(args.log_level, args.log_format)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return EXIT_USAGE
     try:
-        return int(args.func(args))
-    except KeyboardInterrupt:
-        return EXIT_OK
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        configure_logging(args.log_level, args.log_format)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return EXIT_USAGE
+        try:
+            code = int(args.func(args))
+        except KeyboardInterrupt:
+            code = EXIT_OK
+        sys.stdout.flush()  # here, so a reader gone away (`| head`) is seen below, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        return _reader_gone()
+
+
+def _reader_gone() -> int:
+    """stdout's reader closed the pipe (`check-config FILE | head -1`): stop quietly, as a Unix tool does.
+
+    Python would print a BrokenPipeError traceback, and another one when it flushes stdout at exit; pointing
+    stdout at /dev/null stops the second. The exit code is the shell's for a SIGPIPE death (128 + 13).
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -1,42 +1,60 @@
 """`focas-edge check-config FILE`: validate a config file without connecting to anything.
 
 Exit 0 with a short summary of what the daemon would do; exit 2 with every problem listed, each with
-its path in the file. Warnings (values that were adjusted) are printed either way.
+its path in the file. Warnings (values that were adjusted) are printed either way. Whatever `run` refuses
+at start (state_dir, its files and its lock, the http port, the password), this refuses first with the
+same line, because both ask the same functions.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
-from edge.config import Config, load_config
-from edge.config.service_access import SERVICE_USER, service_problems, state_dir_problem
+from edge.config import Config, http_port, load_config
+from edge.config.service_access import (
+    SERVICE_USER,
+    current_account,
+    service_problems,
+    state_dir_problem,
+    state_files_problem,
+)
 from edge.opcua import missing_extra
+from edge.service.state_lock import held_message, holder
 
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "check-config", help="validate a config file without connecting",
         description="Validate a focas-edge YAML config: every problem is listed with its path in the file. "
-                    "Secrets named by password_env/password_file must be available, as they must be for run.",
+                    "Whatever `run` would refuse, this refuses first, as the same user: secrets named by "
+                    "password_env/password_file must be available, state_dir and the files in it writable, "
+                    "state_dir not in use by another focas-edge, http.port free.",
         epilog="Exit codes: 0 valid, 2 invalid (every problem listed).")
     parser.add_argument("config", metavar="FILE", help="the YAML config file")
     parser.add_argument("--quiet", "-q", action="store_true", help="print nothing when the file is valid")
     parser.add_argument("--as-service", action="store_true",
-                        help="also check that the systemd service's user can read every file the config names "
-                             "and write state_dir (under the unit's ProtectSystem=strict)")
+                        help="check as the systemd service will run it: its user can read the config and every "
+                             "file it names and write state_dir and the files in it (under the unit's "
+                             "ProtectSystem=strict), the installed unit hands it the password (EnvironmentFile=, "
+                             "LoadCredential=), and it may bind http.port; a running focas-edge.service holding "
+                             "state_dir is then fine (a reload or restart of it)")
     parser.add_argument("--service-user", default=SERVICE_USER, metavar="NAME",
                         help=f"the service's user for --as-service (default {SERVICE_USER})")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    notes: list[str] = []
     try:
-        config = load_config(args.config)
-        problems = usability_problems(config, args.service_user if args.as_service else None)
+        # As the service, the password is the unit's business (EnvironmentFile=, LoadCredential=), not this shell's.
+        config = load_config(args.config, secrets=not args.as_service)
+        problems = usability_problems(config, Path(args.config), args.service_user if args.as_service else None,
+                                      notes)
     except ConfigError as exc:
         problems = exc.problems
     if problems:
@@ -46,18 +64,34 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     for warning in config.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     if not args.quiet:
         print(summary(config, args.config))
     return EXIT_OK
 
 
-def usability_problems(config: Config, service_user: str | None) -> list[str]:
-    """What the daemon could not use: a state_dir set in the file, and with a service user, its access."""
-    problems = []
-    if config.state_dir is not None:
-        problems.append(state_dir_problem(config.state_dir))
-    if service_user is not None:
-        problems.extend(service_problems(config, service_user))
+def usability_problems(config: Config, path: Path, service_user: str | None,
+                       notes: list[str] | None = None) -> list[str]:
+    """What `run` would refuse beyond the file itself, checked the way `run` checks it, as the user who
+    runs check-config (or, with a service user, as the systemd service will run): state_dir and the files in
+    it, the state_dir lock, the status HTTP port; with a service user also every file the config names
+    and the password the unit hands over. `notes` receives what is fine but worth saying."""
+    state_dir = config.resolved_state_dir
+    problems: list[str | None] = []
+    if service_user is None:
+        problems.append(state_dir_problem(state_dir) or state_files_problem(current_account(), state_dir))
+    else:
+        problems.extend(service_problems(config, service_user, path))
+    held = holder(state_dir)
+    if held is not None and held.is_service and service_user is not None:
+        if notes is not None:
+            notes.append(f"state_dir {state_dir} is in use by the running {held.unit} (PID {held.pid}): fine for "
+                         f"a reload or restart of it; its lock and http port are not checked again")
+    elif held is not None:
+        problems.append(held_message(state_dir, held))
+    if config.http.enabled and held is None:
+        problems.append(http_port.probe(config.http.host, config.http.port))
     if config.opcua.enabled:
         missing = missing_extra()
         problems.append(f"opcua.enabled: {missing}" if missing is not None else None)

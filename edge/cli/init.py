@@ -40,8 +40,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument("--output", "-o", default="-", metavar="FILE", help="where to write (default: stdout)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing output file")
     parser.add_argument("--units", metavar="DIR",
-                        help="also write the systemd units and drop-ins the package carries into DIR (e.g. for a "
-                             "pip install: then `systemctl link` them or copy them to /etc/systemd/system)")
+                        help="also write the systemd units and drop-ins the package carries into DIR, running this "
+                             "installation's focas-edge (e.g. a venv's: then `systemctl link` them or copy them to "
+                             "/etc/systemd/system)")
     parser.set_defaults(func=handle)
 
 
@@ -92,6 +93,34 @@ async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
     return list(await asyncio.gather(*(one(a, i) for a, i in zip(args.addresses, ids, strict=True))))
 
 
+def installation_command() -> str:
+    """The focas-edge command of the installation running now, for the units' ExecStart.
+
+    The environment's own script (a venv's bin/focas-edge, or /opt/focas-edge's from the .deb), else the
+    script this process was started as, else this Python with `-m edge`.
+    """
+    script = Path(sys.prefix) / "bin" / "focas-edge"
+    if script.is_file():
+        return str(script)
+    started_as = Path(sys.argv[0])
+    if started_as.name == "focas-edge" and started_as.is_file():
+        return str(started_as.absolute())
+    return f"{Path(sys.executable).absolute()} -m edge"
+
+
+def _service_reach(command: str) -> list[str]:
+    """What the service user could not read of this installation (a venv in a 0700 home, say)."""
+    from edge.config.service_access import SERVICE_USER, lookup_account, unreadable_file
+
+    try:
+        account = lookup_account(SERVICE_USER)
+    except KeyError:
+        return [f"no user {SERVICE_USER} yet, which the units run as: create it (adduser --system --group "
+                f"{SERVICE_USER}) and make sure it can read {Path(command.split()[0]).parent}"]
+    programs = {Path(command.split()[0]), Path(sys.executable).resolve()}
+    return [p for p in (unreadable_file(account, "ExecStart", program) for program in sorted(programs)) if p]
+
+
 def handle(args: argparse.Namespace) -> int:
     from edge.config.init_writer import render_config
 
@@ -103,11 +132,14 @@ def handle(args: argparse.Namespace) -> int:
     if args.units is not None:
         from edge.config.bundled import write_bundled
 
+        command = installation_command()
         try:
-            units = write_bundled("systemd", Path(args.units), overwrite=args.force)
+            units = write_bundled("systemd", Path(args.units), overwrite=args.force, command=command)
         except (FileExistsError, OSError) as exc:
             return _usage(f"--units {args.units}: {exc}")
-        print(f"wrote {', '.join(u.name for u in units)} to {args.units}", file=sys.stderr)
+        print(f"wrote {', '.join(u.name for u in units)} to {args.units}, running {command}", file=sys.stderr)
+        for warning in _service_reach(command):
+            print(f"focas-edge init: warning: {warning}", file=sys.stderr)
     try:
         ids = _ids(args)
         broker_host, broker_port = _broker(args.broker)

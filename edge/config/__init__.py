@@ -12,7 +12,9 @@ line in the file; soft findings land in `Config.warnings`. What lives here:
   root            Config, the top level (http, spool, state_dir) and the questions across sections
   load            YAML (a key given twice is refused) to Config, problems with paths and lines, cross-checks
   merge, lines    `defaults:`/`templates:` expanded into each machine; problem paths mapped to line numbers
-  service_access  can the systemd service account read and write what the config names
+  service_access  can the daemon's account (or the systemd service's) read and write what the config names
+  service_unit    what the installed focas-edge.service hands the daemon: environment and credentials
+  http_port       can the status endpoint listen where `http:` says (run and check-config, one wording)
   init_writer     a first config written from what the machines answered (`focas-edge init`)
   bundled         the example configs and unit files shipped inside the wheel
 

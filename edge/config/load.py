@@ -29,21 +29,30 @@ from edge.config.merge import expand_machines
 from edge.config.mqtt import FORMATS, _mqtt_rules, read_secret
 from edge.config.opcua import opcua_secret_problems
 from edge.config.root import Config, _duplicate_ids
+from edge.config.service_access import current_account, unreadable_file
 
 
-def load_config(path: str | os.PathLike[str], environ: Mapping[str, str] | None = None) -> Config:
-    """Read and validate a config file; ConfigError lists every problem with its path."""
+def load_config(path: str | os.PathLike[str], environ: Mapping[str, str] | None = None,
+                secrets: bool = True) -> Config:
+    """Read and validate a config file; ConfigError lists every problem with its path.
+
+    `secrets=False` leaves the password unread (check-config --as-service asks the service's unit instead).
+    """
     source = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
+    except PermissionError as exc:
+        denied = unreadable_file(current_account(), "config", Path(path).absolute())
+        raise ConfigError([denied or f"cannot read the file: {exc.strerror}"], source) from exc
     except OSError as exc:
         raise ConfigError([f"cannot read the file: {exc.strerror or exc}"], source) from exc
     except UnicodeDecodeError as exc:
         raise ConfigError([f"not UTF-8 text: {exc.reason} at byte {exc.start}"], source) from exc
-    return parse_config(text, source, environ)
+    return parse_config(text, source, environ, secrets)
 
 
-def parse_config(text: str, source: str = "config", environ: Mapping[str, str] | None = None) -> Config:
+def parse_config(text: str, source: str = "config", environ: Mapping[str, str] | None = None,
+                 secrets: bool = True) -> Config:
     """Validate config text (YAML); see load_config."""
     environ = os.environ if environ is None else environ
     data, expansion_problems = expand_machines(_parse_yaml(text, source))
@@ -54,11 +63,11 @@ def parse_config(text: str, source: str = "config", environ: Mapping[str, str] |
     except ValidationError as exc:
         found = expansion_problems + format_errors(exc)
         found += [p for p in (*_duplicate_ids(data), *_mqtt_cross_checks(data), *_machine_cross_checks(data),
-                                   *_secret_problems(data, environ),
-                                   *opcua_secret_problems(data.get("opcua"), environ))
+                                   *_secret_problems(data, environ, secrets),
+                                   *opcua_secret_problems(data.get("opcua"), environ, secrets))
                   if p not in found]
         raise ConfigError(with_lines(found, text), source) from None
-    problems = [*_secret_problems(data, environ), *opcua_secret_problems(data.get("opcua"), environ)]
+    problems = [*_secret_problems(data, environ, secrets), *opcua_secret_problems(data.get("opcua"), environ, secrets)]
     if problems:
         raise ConfigError(with_lines(problems, text), source)
     config._warnings.extend(_clamp_warnings(data))
@@ -227,10 +236,10 @@ def _machine_cross_checks(data: dict[str, Any]) -> Iterator[str]:
                 yield f"machines[{index}].{key}: {message}"
 
 
-def _secret_problems(data: dict[str, Any], environ: Mapping[str, str]) -> list[str]:
+def _secret_problems(data: dict[str, Any], environ: Mapping[str, str], secrets: bool = True) -> list[str]:
     """The password cannot be had (read from the raw data, so it shows beside schema errors)."""
     mqtt = data.get("mqtt")
-    if not isinstance(mqtt, dict):
+    if not secrets or not isinstance(mqtt, dict):
         return []
     try:
         read_secret(mqtt.get("password_env"), mqtt.get("password_file"), environ)

@@ -126,7 +126,10 @@ def read_secret(password_env: object, password_file: object, environ: Mapping[st
         try:
             return Path(password_file).read_text(encoding="utf-8").rstrip("\r\n")
         except OSError as exc:
-            raise ConfigError([f"mqtt.password_file: cannot read {password_file}: {exc.strerror}"]) from exc
+            credential = Path("/run/credentials") in Path(password_file).parents
+            hint = (" (a systemd credential: it exists only inside the service whose unit loads it with "
+                    "LoadCredential=; check it with check-config --as-service)") if credential else ""
+            raise ConfigError([f"mqtt.password_file: cannot read {password_file}: {exc.strerror}{hint}"]) from exc
     return None
 
 

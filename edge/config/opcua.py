@@ -132,9 +132,12 @@ class OpcUaConfig(_Model):
         return passwords
 
 
-def opcua_secret_problems(data: object, environ: Mapping[str, str]) -> list[str]:
-    """The users' passwords cannot be had (only when the server is enabled: a disabled section reads none)."""
-    if not isinstance(data, dict):
+def opcua_secret_problems(data: object, environ: Mapping[str, str], secrets: bool = True) -> list[str]:
+    """The users' passwords cannot be had (only when the server is enabled: a disabled section reads none).
+
+    `secrets=False` (check-config --as-service) leaves them unread, as for the MQTT password: the unit hands
+    the service its environment, not this shell."""
+    if not secrets or not isinstance(data, dict):
         return []
     try:
         section = OpcUaConfig.model_validate(data)

@@ -3,6 +3,7 @@
 What lives here:
 
     daemon        the collector daemon: one publisher, a poller per machine, signals, reload, the watchdog
+    state_lock    one daemon per state_dir: the flock the daemon holds and check-config asks about
     settings      the one place that turns the pydantic config into the settings dataclasses of the
                   layers below (PublishSettings, MachineSettings, PollSettings, CommandSettings,
                   OpcUaSettings)
@@ -27,4 +28,4 @@ Rules:
 """
 
 __all__ = ["daemon", "daemon_view", "gc_tuning", "logformat", "opcua_output", "outputs", "sdnotify", "settings",
-           "status_http", "status_page"]
+           "state_lock", "status_http", "status_page"]

@@ -20,7 +20,8 @@ from edge import ConfigError, __version__
 from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
 from edge.command import CommandService
 from edge.config import Config, MachineConfig, load_config
-from edge.config.service_access import state_dir_problem
+from edge.config.http_port import bind_problem
+from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
 from edge.service.gc_tuning import tune_collector
@@ -28,6 +29,7 @@ from edge.service.opcua_output import opcua_output
 from edge.service.outputs import Outputs
 from edge.service.sdnotify import SystemdNotifier
 from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
+from edge.service.state_lock import StateDirLock
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
@@ -44,8 +46,15 @@ class Daemon:
         self.session_factory = session_factory
         self.notifier = notifier or SystemdNotifier()
         self.state_dir = config.resolved_state_dir
-        self.spool = open_spool(self.state_dir, int(config.spool.max_bytes), config.spool.max_age_s)
-        self.publisher = Publisher(publish_settings(config), spool=self.spool)
+        self._source = str(config_path) if config_path is not None else "config"
+        settings = publish_settings(config)  # the password first: a missing one refuses before state_dir
+        self.lock = self._take_state_dir()
+        try:
+            self.spool = open_spool(self.state_dir, int(config.spool.max_bytes), config.spool.max_age_s)
+        except BaseException:
+            self.lock.release()
+            raise
+        self.publisher = Publisher(settings, spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
@@ -61,11 +70,42 @@ class Daemon:
         self._started = time.monotonic()
         self.status_http: StatusServer | None = None
 
+    def _take_state_dir(self) -> StateDirLock:
+        """One daemon per state_dir, and only one whose user can read and write every file in it.
+
+        Both refusals are ConfigErrors (one line, exit 2, not restarted by the unit): restarting cannot
+        help until someone stops the other daemon or runs the chown the line gives.
+        """
+        account = current_account()
+        try:
+            lock = StateDirLock.acquire(self.state_dir)
+        except ConfigError as exc:
+            raise ConfigError(exc.problems, self._source) from None
+        except PermissionError as exc:  # a lock file left by a run as another user
+            problem = state_files_problem(account, self.state_dir)
+            raise ConfigError([problem or f"state_dir: cannot open {exc.filename} ({exc.strerror})"],
+                              self._source) from None
+        problem = state_files_problem(account, self.state_dir)
+        if problem is not None:
+            lock.release()
+            raise ConfigError([problem], self._source)
+        info = self.state_dir.stat()
+        if account.uid == 0 and info.st_uid != 0:
+            owner = owner_of(info)
+            log.warning("running as root in state_dir=%s, which belongs to %s: the files this run creates there "
+                        "will be root's and the service will refuse them; afterwards: chown -R %s %s",
+                        self.state_dir, owner, owner, self.state_dir)
+        return lock
+
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> int:
-        self.state_dir.mkdir(parents=True, exist_ok=True)
         self._install_signals()
-        await self._start_status_http()
+        try:
+            await self._start_status_http()
+        except BaseException:
+            self.spool.close()
+            self.lock.release()
+            raise
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
         await self._start_opcua()
@@ -113,6 +153,7 @@ class Daemon:
         if self.status_http is not None:
             await self.status_http.stop()
             self.status_http = None
+        self.lock.release()  # last: nothing of this daemon touches state_dir any more
         log.info("stopped")
 
     async def _start_status_http(self) -> None:
@@ -121,7 +162,10 @@ class Daemon:
         if not http.enabled or self.status_http is not None:
             return
         server = StatusServer(self, http.host, http.port, http.healthy_share)
-        await server.start()
+        try:
+            await server.start()
+        except OSError as exc:  # the port taken, a host not on this machine: a setting, not a crash
+            raise ConfigError([bind_problem(http.host, http.port, exc)], self._source) from None
         self.status_http = server
 
     async def _start_opcua(self) -> None:

@@ -3,6 +3,7 @@ polls what each control answered, no more."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -85,14 +86,27 @@ def test_an_existing_file_is_not_overwritten_without_force(tmp_path: Path) -> No
     assert out.read_text() == "mine\n"
 
 
-def test_init_writes_the_bundled_units_out_too(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_init_writes_the_bundled_units_out_too_running_this_installation(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The units run the focas-edge of the installation init runs from (this venv), not the .deb's /opt."""
     units = tmp_path / "units"
     repo_units = Path(__file__).resolve().parents[2] / "systemd"
+    here = str(Path(sys.prefix) / "bin" / "focas-edge")
     with FleetThread(Fleet([MachineSpec(profile="16i")], base_port=0)) as fleet:
         args = ["init", f"127.0.0.1:{fleet[0].port}", "--units", str(units), "-o", str(tmp_path / "edge.yaml")]
         assert main(args) == EXIT_OK, capsys.readouterr().err
-        assert {f.name: f.read_bytes() for f in units.iterdir()} == \
-            {f.name: f.read_bytes() for f in repo_units.iterdir() if f.is_file()}
-        assert "focas-edge.service" in {f.name for f in units.iterdir()}
+        written = {f.name: f.read_text() for f in units.iterdir()}
+        assert written.keys() == {f.name for f in repo_units.iterdir() if f.is_file()}
+        exec_starts = {name: [line for line in text.splitlines() if line.startswith("ExecStart=")]
+                       for name, text in written.items()}
+        assert exec_starts["focas-edge.service"] == [f"ExecStart={here} run --config /etc/focas-edge/edge.yaml"]
+        assert exec_starts["focas-edge-fwlib-host.service"] == [
+            f"ExecStart={here} fwlib-host --config /etc/focas-edge/fwlib-host.yaml"]
+        if not Path("/opt/focas-edge").exists():
+            assert not [name for name, text in written.items() if "/opt/" in text]
+        for name, text in written.items():  # nothing else differs from the shipped files
+            shipped = (repo_units / name).read_text().replace("/opt/focas-edge/bin/focas-edge", here)
+            assert text.replace("ProtectHome=read-only", "ProtectHome=yes").replace(
+                f"# {here} is under a home directory: read-only, not hidden\n", "") == shipped
         assert main(args) == EXIT_USAGE, "the units are not overwritten without --force"
         assert "use --force" in capsys.readouterr().err

@@ -70,7 +70,27 @@ def test_deb_carries_the_venv_command_units_and_example_config(deb: Path) -> Non
     assert "/usr/share/doc/focas-edge/copyright" in entries
     arch = subprocess.run(["dpkg", "--print-architecture"], capture_output=True, text=True, check=True).stdout
     assert deb_field(deb, "Architecture") == arch.strip() and deb_field(deb, "Package") == "focas-edge"
-    assert "adduser" in deb_field(deb, "Depends")
+    # A minimal Debian has no python3: the venv's bin/python -> /usr/bin/python3 of the minor version it was
+    # built with must come from Depends; procps for the unit's ExecReload=/bin/kill (make systemd-check installs
+    # into a minbase root without them).
+    depends = [d.strip() for d in deb_field(deb, "Depends").split(",")]
+    built_with = subprocess.run([os.environ.get("DEB_PYTHON", "/usr/bin/python3"), "-c",
+                                 "import sys; print(*sys.version_info[:2])"], capture_output=True, text=True,
+                                check=True).stdout.split()
+    major, minor = int(built_with[0]), int(built_with[1])
+    assert (major, minor) >= (3, 11)
+    assert f"python3 (>= {major}.{minor})" in depends and f"python3 (<< {major}.{minor + 1})" in depends, depends
+    assert {"adduser", "procps"} <= set(depends)
+
+
+def test_postinst_makes_the_home_before_adduser_and_gives_the_state_back() -> None:
+    """adduser warns about a --no-create-home home that does not exist; a run as root leaves root's files."""
+    lines = [line.strip() for line in (REPO / "packaging/deb/postinst").read_text().splitlines()
+             if not line.strip().startswith("#")]
+    made = next(i for i, line in enumerate(lines) if line.startswith("install -d") and "/var/lib/focas-edge" in line)
+    adduser = next(i for i, line in enumerate(lines) if line.startswith("adduser "))
+    assert made < adduser
+    assert "chown -Rh focas-edge:focas-edge /var/lib/focas-edge" in lines
 
 
 def test_deb_scripts_enable_nothing_and_the_venv_points_at_opt(deb: Path, tmp_path: Path) -> None:

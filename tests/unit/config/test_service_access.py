@@ -4,9 +4,6 @@ state_dir stops `run` with exit 2 and one line."""
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -15,15 +12,6 @@ from edge.cli import main
 from edge.config import parse_config, service_access
 from edge.config.service_access import Account, lookup_account, service_problems, state_dir_problem
 from tests.unit.config.minimal import MINIMAL
-
-
-@pytest.fixture
-def open_dir() -> Iterator[Path]:
-    """A directory any user can enter (pytest's tmp_path is 0700, which would hide everything in it)."""
-    path = Path(tempfile.mkdtemp(prefix="focas-edge-svc-"))
-    path.chmod(0o755)
-    yield path
-    shutil.rmtree(path)
 
 
 @pytest.fixture
@@ -110,3 +98,43 @@ def test_state_dir_probe_leaves_nothing_behind(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "file").write_text("")
     assert state_dir_problem(tmp_path / "file") == f"state_dir: {tmp_path / 'file'} is not a directory"
+
+
+def test_as_service_names_a_state_file_left_by_root_unless_systemd_hands_it_over(
+        open_dir: Path, other_user: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """StateDirectory= chowns the whole tree only when the directory itself is not the service's already."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root to make files of two owners")
+    account = lookup_account(other_user)
+    monkeypatch.setattr(service_access, "UNIT_STATE_DIR", open_dir)
+    left = open_dir / "sparkplug_bdseq.json"
+    left.write_text("{}")
+    left.chmod(0o600)
+    config = parse_config(MINIMAL + f"state_dir: {open_dir}\n")
+    assert service_problems(config, other_user) == []  # dir root's: systemd hands it all to the service
+    os.chown(open_dir, account.uid, account.gid if account.gid is not None else -1)
+    assert service_problems(config, other_user) == [
+        f"state_dir: {left} belongs to root:root (mode -rw-------), so user {other_user} cannot read and write it "
+        f"(left by a run as another user?); fix: chown -R {account.owner} {open_dir}"]
+
+
+def test_as_service_names_a_port_the_service_may_not_bind(tmp_path: Path, other_user: str) -> None:
+    config = parse_config(MINIMAL + f"state_dir: {service_access.UNIT_STATE_DIR}\nhttp: {{enabled: true, port: 80}}\n")
+    (problem,) = [p for p in service_problems(config, other_user) if p.startswith("http")]
+    assert problem.startswith("http.port: 80 is below") and "CapabilityBoundingSet=" in problem
+
+
+def test_a_running_service_holding_state_dir_is_fine_as_the_service_and_refused_otherwise(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """check-config --as-service after an upgrade or before a reload meets the running service's own lock."""
+    from edge.cli import check_config
+    from edge.service.state_lock import Holder
+
+    monkeypatch.setattr(check_config, "holder", lambda state_dir: Holder(4242, "focas-edge.service"))
+    monkeypatch.setattr(check_config, "service_problems", lambda *args: [])
+    config = parse_config(MINIMAL + f"state_dir: {tmp_path}\nhttp: {{enabled: true}}\n")
+    notes: list[str] = []
+    assert check_config.usability_problems(config, tmp_path / "edge.yaml", "focas-edge", notes) == []
+    assert "in use by the running focas-edge.service (PID 4242)" in notes[0]
+    (problem,) = check_config.usability_problems(config, tmp_path / "edge.yaml", None)
+    assert "(PID 4242, focas-edge.service;" in problem and "systemctl stop focas-edge" in problem
