@@ -15,7 +15,7 @@ from typing import Any
 
 from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
-from edge.config import Config, http_port, load_config
+from edge.config import Config, listen_port, load_config
 from edge.config.service_access import (
     SERVICE_USER,
     current_account,
@@ -91,10 +91,12 @@ def usability_problems(config: Config, path: Path, service_user: str | None,
     elif held is not None:
         problems.append(held_message(state_dir, held))
     if config.http.enabled and held is None:
-        problems.append(http_port.probe(config.http.host, config.http.port))
+        problems.append(listen_port.probe(config.http.host, config.http.port))
     if config.opcua.enabled:
         missing = missing_extra()
         problems.append(f"opcua.enabled: {missing}" if missing is not None else None)
+        if held is None:
+            problems.append(listen_port.probe(config.opcua.host, config.opcua.port, "opcua"))
     return [p for p in problems if p is not None]
 
 

@@ -14,7 +14,8 @@ line in the file; soft findings land in `Config.warnings`. What lives here:
   merge, lines    `defaults:`/`templates:` expanded into each machine; problem paths mapped to line numbers
   service_access  can the daemon's account (or the systemd service's) read and write what the config names
   service_unit    what the installed focas-edge.service hands the daemon: environment and credentials
-  http_port       can the status endpoint listen where `http:` says (run and check-config, one wording)
+  listen_port     can the status endpoint (`http:`) and the OPC UA server (`opcua:`) listen where the
+                  config says (run and check-config, one wording)
   init_writer     a first config written from what the machines answered (`focas-edge init`)
   bundled         the example configs and unit files shipped inside the wheel
 

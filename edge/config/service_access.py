@@ -18,7 +18,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from edge.config.http_port import service_port_problem
+from edge.config.listen_port import service_port_problem
 from edge.config.root import Config
 from edge.config.service_unit import password_problems, read_unit
 
@@ -247,4 +247,6 @@ def service_problems(config: Config, user: str = SERVICE_USER, config_path: Path
     problems += password_problems(mqtt.password_env, mqtt.password_file, read_unit())
     if config.http.enabled:
         problems.append(service_port_problem(config.http.port))
+    if config.opcua.enabled:
+        problems.append(service_port_problem(config.opcua.port, "opcua"))
     return [p for p in problems if p is not None]

@@ -19,8 +19,8 @@ from pathlib import Path
 from edge import ConfigError, __version__
 from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
 from edge.command import CommandService
-from edge.config import Config, MachineConfig, load_config
-from edge.config.http_port import bind_problem
+from edge.config import Config, MachineConfig, listen_port, load_config
+from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
@@ -102,6 +102,7 @@ class Daemon:
         self._install_signals()
         try:
             await self._start_status_http()
+            self._check_opcua_port()
         except BaseException:
             self.spool.close()
             self.lock.release()
@@ -168,9 +169,19 @@ class Daemon:
             raise ConfigError([bind_problem(http.host, http.port, exc)], self._source) from None
         self.status_http = server
 
+    def _check_opcua_port(self) -> None:
+        """The OPC UA port taken is refused like the status port's (one line, exit 2), before anything starts:
+        asyncua would log a traceback and the daemon would run without the server nobody asked to lose."""
+        if self.opcua is None:
+            return
+        settings = self.opcua.settings
+        problem = listen_port.probe(settings.host, settings.port, "opcua")
+        if problem is not None:
+            raise ConfigError([problem], self._source)
+
     async def _start_opcua(self) -> None:
-        """The optional OPC UA server; one that cannot start (port taken, unreadable certificate) is an error
-        logged, and the daemon goes on polling and publishing without it."""
+        """The optional OPC UA server; one that cannot start for another reason than its port (an unreadable
+        certificate, say) is an error logged, and the daemon goes on polling and publishing without it."""
         if self.opcua is None:
             return
         try:

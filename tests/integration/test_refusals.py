@@ -84,6 +84,18 @@ def port_taken(folder: Path, listener: socket.socket) -> Case:
     return Case(config, f"http.port: 127.0.0.1:{port} is already in use", [])
 
 
+def opcua_port_taken(folder: Path, listener: socket.socket) -> Case:
+    """The OPC UA server's port, refused the same way (the daemon does not run on without the server)."""
+    pytest.importorskip("asyncua", reason="the focas-edge[opcua] extra is not installed")
+    port = listener.getsockname()[1]
+    (folder / "opcua.password").write_text("secret\n")
+    config = write_config(folder, folder / "state",
+                          f"opcua:\n  enabled: true\n  host: 127.0.0.1\n  port: {port}\n  security: "
+                          f"[Basic256Sha256-SignAndEncrypt]\n  users: [{{username: u, password_file: "
+                          f"{folder / 'opcua.password'}}}]\n")
+    return Case(config, f"opcua.port: 127.0.0.1:{port} is already in use", [])
+
+
 def password_file_missing(folder: Path) -> Case:
     config = write_config(folder, folder / "state",
                           mqtt_extra=f"  username: gw\n  password_file: {folder / 'no-such-password'}\n")
@@ -135,7 +147,7 @@ def hold() -> Iterator[Callable[[Path], None]]:
         lock.release()
 
 
-CASES = ["state_dir_unusable", "state_file_of_another_user", "port_taken", "password_file_missing",
+CASES = ["state_dir_unusable", "state_file_of_another_user", "port_taken", "opcua_port_taken", "password_file_missing",
          "password_env_unset", "lock_held", "config_unreadable"]
 
 
@@ -147,6 +159,7 @@ def test_run_refuses_in_one_line_what_check_config_refused_first(
         "state_dir_unusable": lambda: state_dir_unusable(folder),
         "state_file_of_another_user": lambda: state_file_of_another_user(folder),
         "port_taken": lambda: port_taken(folder, listener),
+        "opcua_port_taken": lambda: opcua_port_taken(folder, listener),
         "password_file_missing": lambda: password_file_missing(folder),
         "password_env_unset": lambda: password_env_unset(folder),
         "lock_held": lambda: lock_held(folder, hold),
