@@ -131,3 +131,18 @@ async def test_demo_uses_a_broker_that_answers(demo: Demo, mosquitto: Mosquitto,
     assert demo.lines[-1] == "== stopped cleanly", demo.text()
     assert mosquitto.running, "the demo leaves a broker it did not start alone"
     assert any(line.startswith("NDEATH") for line in demo.lines), "Ctrl-C ends the Sparkplug session cleanly"
+
+
+async def test_a_second_demo_on_one_checkout_says_so_and_starts_nothing(demo: Demo, mosquitto: Mosquitto,
+                                                                          tmp_path: Path) -> None:
+    config = demo_config(tmp_path, mosquitto.port)
+    await demo.start(config, "--raw")
+    await reaches_live_data(demo)
+    second = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "edge.cli.views.demo", "--duration", "30", "--config", str(config),
+        cwd=REPO, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    out, _ = await asyncio.wait_for(second.communicate(), 30)
+    assert second.returncode == 2, out.decode()
+    lines = out.decode().splitlines()
+    assert len(lines) == 1 and "is in use by another focas-edge" in lines[0], lines
+    assert await demo.interrupt() == 0, demo.text()

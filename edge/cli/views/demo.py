@@ -21,9 +21,10 @@ from typing import Any
 
 from edge.cli.views.live_view import LiveView
 from edge.cli.views.watch import Watcher
-from edge.config import Config, MachineConfig, load_config
+from edge.config import Config, MachineConfig, listen_port, load_config
 from edge.service.daemon import Daemon
 from edge.service.logformat import configure_logging
+from edge.service.state_lock import held_message, holder
 from edge.sim import CycleSpec, Fleet, MachineSpec
 
 log = logging.getLogger("edge.cli.views.demo")
@@ -88,8 +89,25 @@ async def start_fleet(config: Config) -> tuple[Fleet, Config]:
     return fleet, config.model_copy(update={"machines": machines})
 
 
+def opcua_on_a_free_port(config: Config) -> Config:
+    """The demo's OPC UA server moves to a free port when its own is taken (as the simulators do), and says so."""
+    opcua = config.opcua
+    if not opcua.enabled or listen_port.probe(opcua.host, opcua.port, "opcua") is None:
+        return config
+    with socket.socket() as sock:
+        sock.bind((opcua.host, 0))
+        port = sock.getsockname()[1]
+    log.warning("OPC UA port %d is taken: using %d", opcua.port, port)
+    return config.model_copy(update={"opcua": opcua.model_copy(update={"port": port})})
+
+
 async def run_demo(config_path: Path, duration: float | None, raw: bool = False) -> int:
     config = load_config(config_path)
+    running = holder(config.resolved_state_dir)
+    if running is not None:  # a second `make run` on this checkout: say so before starting anything
+        print(f"== {held_message(config.resolved_state_dir, running)}", flush=True)
+        return 2
+    config = opcua_on_a_free_port(config)
     fleet, config = await start_fleet(config)
     mqtt = config.mqtt
     port = mqtt.effective_port
