@@ -1,0 +1,201 @@
+"""Many gateways from one fleet file, on two mosquitto brokers bridged to each other (docs/install.md, "Many
+gateways"): two `focas-edge run --gateway` processes, simulated CNCs over TCP, a subscriber on each broker.
+
+Every machine is seen exactly once on either broker (one DBIRTH, its data from one edge node id, no message
+twice), the two edge nodes never collide (one NBIRTH each, no NDEATH while running), and moving a machine
+between gateways (edit the file, SIGHUP the gaining gateway, then the losing one) loses no sample: each
+node's Sparkplug seq runs without a hole on both brokers, and the moved machine's CNC-clock macro, polled
+every 100 ms, has no gap across the move.
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+
+import pytest
+
+from edge.sim.fleet import Fleet, MachineSpec
+from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
+from tests.integration.delivery import sparkplug_arrivals
+from tests.integration.mqtt_observer import Observer, Received
+from tests.integration.test_signals import DaemonProcess
+
+pytestmark = pytest.mark.integration
+
+GROUP = "spBv1.0/plant"
+CLOCK_MACRO = 500
+PERIOD_S = 0.1
+MOVED = "m1"
+HALLS = {"hall-a": ("m1", "m2"), "hall-b": ("m3", "m4")}
+# Polls 100 ms apart, each stamped with CNC time: a hole in the moved machine's series longer than this is a
+# stretch nobody polled it (the test's bound, not a speed target: several periods of scheduling slack).
+MAX_GAP_MS = 600
+
+
+@pytest.fixture
+def bridged() -> Iterator[tuple[Mosquitto, Mosquitto]]:
+    """Broker A and broker B, A bridged to B both ways (one bridge: mosquitto's no-local keeps it loop-free)."""
+    binary = mosquitto_binary()
+    if binary is None:
+        pytest.skip("mosquitto is not installed (make test installs it where it can)")
+    a, b = Mosquitto(binary), Mosquitto(binary)
+    with a.conf.open("a") as conf:
+        conf.write(f"connection hall-bridge\naddress {b.host}:{b.port}\n"
+                   "topic spBv1.0/# both 1\ntopic probe/# both 1\ncleansession true\nrestart_timeout 1\n")
+    try:
+        b.start()
+        a.start()
+        yield a, b
+    finally:
+        a.close()
+        b.close()
+
+
+@pytest.fixture
+async def daemons() -> AsyncIterator[list[DaemonProcess]]:
+    started: list[DaemonProcess] = []
+    yield started
+    for daemon in started:
+        await daemon.kill()
+
+
+def fleet_file(brokers: tuple[Mosquitto, Mosquitto], state: Path, ports: dict[str, int],
+               owners: dict[str, str]) -> str:
+    """One file for both gateways: hall-a on broker A, hall-b on broker B, edge node ids from their names."""
+    a, b = brokers
+    machines = "".join(
+        f"  - {{id: {mid}, gateway: {owners[mid]}, host: 127.0.0.1, port: {port}, "
+        f"poll: {{periods: {{status: 1s, macros: {PERIOD_S}s}}, macros: [{CLOCK_MACRO}]}}, "
+        f"timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.3}}}}\n"
+        for mid, port in ports.items())
+    return f"""
+mqtt:
+  formats: [sparkplug]
+  sparkplug: {{group_id: plant}}
+gateways:
+  hall-a:
+    mqtt: {{host: {a.host}, port: {a.port}}}
+    state_dir: {state / "hall-a"}
+  hall-b:
+    mqtt: {{host: {b.host}, port: {b.port}}}
+    state_dir: {state / "hall-b"}
+machines:
+{machines}"""
+
+
+def seq_holes(messages: list[Received], node: str) -> list[str]:
+    """Places where a node's Sparkplug seq (NBIRTH 0, then +1 mod 256 per message) skips or repeats."""
+    holes = []
+    previous: int | None = None
+    for m in messages:
+        parts = m.topic.split("/")
+        if len(parts) < 4 or parts[3] != node or m.kind == "NDEATH":
+            continue
+        seq = m.spb().seq
+        if previous is not None and m.kind != "NBIRTH" and seq != (previous + 1) % 256:
+            holes.append(f"{m.topic}: seq {seq} after {previous}")
+        previous = seq
+    return holes
+
+
+def clock_stamps(messages: list[Received], node: str, device: str) -> list[int]:
+    return [a.key[2] for a in sparkplug_arrivals(messages, "plant", node)
+            if a.key[0] == device and a.key[1] == f"Macro/{CLOCK_MACRO}"]
+
+
+async def wait_both(observers: list[Observer], topic: str, timeout: float = 20) -> None:
+    for observer in observers:
+        await observer.wait_topic(topic, timeout=timeout)
+
+
+async def bridge_up(a: Mosquitto, b: Mosquitto) -> list[Observer]:
+    """A subscriber on each broker, once a probe published on either has reached the other through the bridge."""
+    observers = [Observer(a, ("spBv1.0/#", "probe/#")), Observer(b, ("spBv1.0/#", "probe/#"))]
+
+    async def crossed(sender: Observer, receiver: Observer, topic: str) -> bool:
+        if receiver.on(topic):
+            return True
+        await sender.publish(topic, b"x")  # again until one gets through: the bridge may not be up yet
+        return False
+
+    for sender, receiver, topic in ((observers[0], observers[1], "probe/a"), (observers[1], observers[0], "probe/b")):
+        await async_wait_for(lambda s=sender, r=receiver, t=topic: crossed(s, r, t), 20, interval=0.1,
+                             message=f"{topic} across the bridge")
+    return observers
+
+
+async def test_two_gateways_share_one_fleet_file_and_a_machine_moves_without_losing_a_sample(
+        bridged: tuple[Mosquitto, Mosquitto], daemons: list[DaemonProcess], tmp_path: Path) -> None:
+    a, b = bridged
+    observers = await bridge_up(a, b)
+    try:
+        specs = [MachineSpec(profile="30i", clock_macro=CLOCK_MACRO) for _ in range(4)]
+        async with Fleet(specs, base_port=0) as fleet:
+            ports = {f"m{i + 1}": sim.port for i, sim in enumerate(fleet)}
+            owners = {mid: hall for hall, mids in HALLS.items() for mid in mids}
+            path = tmp_path / "fleet.yaml"
+            path.write_text(fleet_file(bridged, tmp_path / "state", ports, owners))
+            gateways = {hall: DaemonProcess(path, env={"FOCAS_EDGE_GATEWAY": hall}) for hall in HALLS}
+            for hall, daemon in gateways.items():
+                daemon.log = tmp_path / f"{hall}.log"  # one file, two processes: a log each
+            daemons.extend(gateways.values())
+            for daemon in gateways.values():
+                await daemon.start()
+            for hall, mids in HALLS.items():
+                for mid in mids:
+                    await wait_both(observers, f"{GROUP}/DBIRTH/{hall}/{mid}")
+            await async_wait_for(lambda: all(len(clock_stamps(o.snapshot(), "hall-a", MOVED)) >= 10
+                                             for o in observers), 20, message="the moved machine's data")
+
+            # The move: m1 to hall-b. The gaining gateway first, so someone polls m1 all along.
+            path.write_text(fleet_file(bridged, tmp_path / "state", ports, {**owners, MOVED: "hall-b"}))
+            gateways["hall-b"].signal(signal.SIGHUP)
+            await wait_both(observers, f"{GROUP}/DBIRTH/hall-b/{MOVED}")
+            gateways["hall-a"].signal(signal.SIGHUP)
+            await wait_both(observers, f"{GROUP}/DDEATH/hall-a/{MOVED}")
+            await async_wait_for(lambda: all(len(clock_stamps(o.snapshot(), "hall-b", MOVED)) >= 20
+                                             for o in observers), 20, message="m1 from hall-b after the move")
+            for daemon in gateways.values():
+                daemon.signal(signal.SIGTERM)
+            for daemon in gateways.values():
+                assert await daemon.wait(15) == 0, daemon.output()
+            for hall in HALLS:
+                await wait_both(observers, f"{GROUP}/NDEATH/{hall}", timeout=10)
+        assert "reload: machine m1 moved to gateway hall-b" in gateways["hall-a"].output()
+        assert "reloaded added=['m1'] removed=[] changed=[]" in gateways["hall-b"].output()
+
+        for side, observer in zip("AB", observers, strict=True):
+            messages = observer.snapshot()
+            spb = [m for m in messages if m.kind]
+            births = sorted((m.topic.split("/")[3], m.topic.split("/")[-1]) for m in spb if m.kind == "DBIRTH")
+            assert births == sorted([("hall-a", "m1"), ("hall-a", "m2"), ("hall-b", "m1"), ("hall-b", "m3"),
+                                     ("hall-b", "m4")]), f"broker {side}: each machine born once per node: {births}"
+            assert sorted(m.topic for m in spb if m.kind == "NBIRTH") == [f"{GROUP}/NBIRTH/hall-a",
+                                                                         f"{GROUP}/NBIRTH/hall-b"], side
+            assert sorted(m.topic for m in spb if m.kind == "NDEATH") == [f"{GROUP}/NDEATH/hall-a",
+                                                                         f"{GROUP}/NDEATH/hall-b"], side
+            data_from = {(m.topic.split("/")[3], m.topic.split("/")[-1]) for m in spb if m.kind == "DDATA"}
+            assert data_from <= {("hall-a", "m1"), ("hall-a", "m2"), ("hall-b", "m1"), ("hall-b", "m3"),
+                                 ("hall-b", "m4")}, f"broker {side}: a machine's data from another node: {data_from}"
+            for node in HALLS:
+                assert seq_holes(spb, node) == [], f"broker {side}, node {node}: messages lost or doubled"
+                keys = [a.key for a in sparkplug_arrivals(spb, "plant", node) if not a.birth]
+                assert len(keys) == len(set(keys)), f"broker {side}: a sample of {node} arrived twice"
+            # hall-a sent nothing of m1 after its DDEATH; hall-b nothing before its DBIRTH.
+            kinds = [(m.kind, m.topic.split("/")[3]) for m in spb if m.topic.endswith(f"/{MOVED}")]
+            death = kinds.index(("DDEATH", "hall-a"))
+            assert ("DDATA", "hall-a") not in kinds[death:], side
+            assert ("DDATA", "hall-b") not in kinds[:kinds.index(("DBIRTH", "hall-b"))], side
+            stamps = sorted(set(clock_stamps(spb, "hall-a", MOVED)) | set(clock_stamps(spb, "hall-b", MOVED)))
+            moved_at = min(clock_stamps(spb, "hall-b", MOVED))
+            gaps = [(later - earlier, earlier) for earlier, later in itertools.pairwise(stamps)]
+            worst = max(gaps)
+            assert worst[0] <= MAX_GAP_MS, (f"broker {side}: {MOVED} unpolled for {worst[0]} ms from CNC time "
+                                            f"{worst[1]} (the move began at {moved_at})")
+            assert stamps[0] < moved_at < stamps[-1]
+    finally:
+        for observer in observers:
+            observer.close()
