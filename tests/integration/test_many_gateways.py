@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 import signal
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -21,7 +21,7 @@ from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
 from tests.integration.delivery import sparkplug_arrivals
 from tests.integration.mqtt_observer import Observer, Received
-from tests.integration.test_signals import DaemonProcess
+from tests.integration.test_signals import DaemonProcess, daemons  # noqa: F401 (daemons: the fixture)
 
 pytestmark = pytest.mark.integration
 
@@ -54,24 +54,16 @@ def bridged() -> Iterator[tuple[Mosquitto, Mosquitto]]:
         b.close()
 
 
-@pytest.fixture
-async def daemons() -> AsyncIterator[list[DaemonProcess]]:
-    started: list[DaemonProcess] = []
-    yield started
-    for daemon in started:
-        await daemon.kill()
-
-
 def fleet_file(brokers: tuple[Mosquitto, Mosquitto], state: Path, ports: dict[str, int],
                owners: dict[str, str]) -> str:
     """One file for both gateways: hall-a on broker A, hall-b on broker B, edge node ids from their names."""
     a, b = brokers
-    machines = "".join(
-        f"  - {{id: {mid}, gateway: {owners[mid]}, host: 127.0.0.1, port: {port}, "
-        f"poll: {{periods: {{status: 1s, macros: {PERIOD_S}s}}, macros: [{CLOCK_MACRO}]}}, "
-        f"timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.3}}}}\n"
-        for mid, port in ports.items())
+    machines = "".join(f"  - {{id: {mid}, gateway: {owners[mid]}, port: {port}}}\n" for mid, port in ports.items())
     return f"""
+defaults:
+  host: 127.0.0.1
+  poll: {{periods: {{status: 1s, macros: {PERIOD_S}s}}, macros: [{CLOCK_MACRO}]}}
+  timeouts: {{request_s: 1, connect_s: 1, backoff_initial_s: 0.1, backoff_max_s: 0.3}}
 mqtt:
   formats: [sparkplug]
   sparkplug: {{group_id: plant}}
@@ -128,7 +120,7 @@ async def bridge_up(a: Mosquitto, b: Mosquitto) -> list[Observer]:
 
 
 async def test_two_gateways_share_one_fleet_file_and_a_machine_moves_without_losing_a_sample(
-        bridged: tuple[Mosquitto, Mosquitto], daemons: list[DaemonProcess], tmp_path: Path) -> None:
+        bridged: tuple[Mosquitto, Mosquitto], daemons: list[DaemonProcess], tmp_path: Path) -> None:  # noqa: F811
     a, b = bridged
     observers = await bridge_up(a, b)
     try:
