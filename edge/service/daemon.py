@@ -20,7 +20,7 @@ from pathlib import Path
 from edge import ConfigError, __version__
 from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
 from edge.command import CommandService
-from edge.config import Config, MachineConfig, listen_port, load_config
+from edge.config import GATEWAY_ENV, Config, MachineConfig, listen_port, load_config
 from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
@@ -343,6 +343,9 @@ def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = N
                gateway: str | None = None) -> int:
     """`gateway`: which gateway of a fleet file with `gateways:` this process is (kept across reloads)."""
     config = load_config(config_path, gateway=gateway)
+    if config.fleet and gateway is None:  # without a name, load_config answers with an overview, not a box
+        raise ConfigError([f"the file lists gateways ({', '.join(config.fleet)}): say which one this is with "
+                           f"--gateway NAME or {GATEWAY_ENV}=NAME"], str(config_path))
     for warning in config.warnings:
         log.warning("config: %s", warning)
     unusable = state_dir_problem(config.resolved_state_dir)

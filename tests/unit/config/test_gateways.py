@@ -132,3 +132,13 @@ def test_check_config_shows_what_this_gateway_polls_and_what_it_leaves(
     monkeypatch.setenv("FOCAS_EDGE_GATEWAY", "hall-x")
     assert main(["check-config", str(path)]) == 2
     assert "gateway 'hall-x' (--gateway or FOCAS_EDGE_GATEWAY) is not in gateways" in capsys.readouterr().err
+
+
+def test_run_refuses_a_fleet_file_without_being_told_which_gateway_it_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("FOCAS_EDGE_GATEWAY", raising=False)
+    path = tmp_path / "fleet.yaml"
+    path.write_text(textwrap.dedent(FLEET))
+    assert main(["run", "--config", str(path)]) == 2
+    assert ("the file lists gateways (hall-a, hall-b): say which one this is with --gateway NAME or "
+            "FOCAS_EDGE_GATEWAY=NAME") in capsys.readouterr().err
