@@ -138,11 +138,13 @@ def _read_assignment(plan: FleetPlan, index: int, machine: dict[str, Any]) -> No
 
 
 def _identity_collisions(plan: FleetPlan, data: dict[str, Any]) -> list[str]:
-    """Two gateways with one Sparkplug edge node id or one explicit MQTT client id: the broker would take one
-    session over with the other, and a host would read both boxes' machines as one node's."""
+    """Two gateways with one Sparkplug edge node id, one explicit MQTT client id or one explicit JSON prefix: the
+    broker would take one session over with the other, a host would read both boxes' machines as one node's,
+    and one gateway's retained JSON status would overwrite the other's."""
     problems = []
     seen_node: dict[tuple[object, object], str] = {}
     seen_client: dict[object, str] = {}
+    seen_prefix: dict[object, str] = {}
     for name in plan.names:
         mqtt = plan.data_for(data, name).get("mqtt")
         if not isinstance(mqtt, dict):
@@ -164,6 +166,16 @@ def _identity_collisions(plan: FleetPlan, data: dict[str, Any]) -> list[str]:
                                 f"{seen_client[client]!r}'s; set it per gateway or leave it to the daemon")
             else:
                 seen_client[client] = name
+        json, formats = mqtt.get("json"), mqtt.get("formats")
+        uses_json = not isinstance(formats, list) or "json" in formats
+        prefix = json.get("prefix") if isinstance(json, dict) and uses_json else None
+        if prefix is not None:
+            if prefix in seen_prefix:
+                problems.append(f"{GATEWAYS_KEY}.{name}: JSON prefix {prefix!r} is also gateway "
+                                f"{seen_prefix[prefix]!r}'s; each gateway's retained <prefix>/_gateway/online "
+                                f"would overwrite the other's: set it per gateway or leave it to the default")
+            else:
+                seen_prefix[prefix] = name
     return problems
 
 

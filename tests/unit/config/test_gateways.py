@@ -66,6 +66,10 @@ def test_a_shared_edge_node_id_or_client_id_is_refused() -> None:
                for p in found), found
     client = FLEET.replace("  host: broker\n", "  host: broker\n  client_id: edge\n", 1)
     assert any("MQTT client id 'edge' is also gateway 'hall-a''s" in p for p in problems(client)), problems(client)
+    prefix = FLEET.replace("  host: broker\n", "  host: broker\n  json: {prefix: plant/focas}\n", 1)
+    assert any("JSON prefix 'plant/focas' is also gateway 'hall-a''s" in p for p in problems(prefix)), problems(prefix)
+    own = prefix.replace("mqtt: {host: broker-b, port: 1884}", "mqtt: {host: broker-b, json: {prefix: plant/b}}")
+    assert fleet("hall-b", own) is not None
 
 
 def test_a_machine_without_a_gateway_or_with_an_unknown_one_is_named_with_its_line() -> None:
