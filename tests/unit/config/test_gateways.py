@@ -146,3 +146,4 @@ def test_run_refuses_a_fleet_file_without_being_told_which_gateway_it_is(
     assert main(["run", "--config", str(path)]) == 2
     assert ("the file lists gateways (hall-a, hall-b): say which one this is with --gateway NAME or "
             "FOCAS_EDGE_GATEWAY=NAME") in capsys.readouterr().err
+
