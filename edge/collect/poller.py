@@ -105,8 +105,9 @@ class MachinePoller:
         self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
         self.last_error = ""  # the last connect, session or read error, for the status page
         self.last_progress = time.monotonic()
-        # Wall time each poll group was last read by a batch that answered: a value's age (status page).
-        self.read_at: dict[pl.Group, float] = {}
+        # Wall time of the last answered batch, by the set of groups it read (one dict store a tick; read_at
+        # turns it into per group times when the status page asks).
+        self._read_at_by_due: dict[AbstractSet[pl.Group], float] = {}
         self._metric_groups: tuple[pl.MachinePlan | None, dict[str, pl.Group]] = (None, {})
         self._clock = ClockFeed(machine.id, machine.zone, machine.max_skew_s)
         self.clock = self._clock.tracker
@@ -154,6 +155,16 @@ class MachinePoller:
     def last_values(self) -> dict[str, Sample]:
         """The last value published for each metric."""
         return self._changes.last_reported()
+
+    @property
+    def read_at(self) -> dict[pl.Group, float]:
+        """Wall time each poll group was last read by a batch that answered, this session (a value's age)."""
+        out: dict[pl.Group, float] = {}
+        for groups, when in self._read_at_by_due.items():
+            for group in groups:
+                if when > out.get(group, 0.0):
+                    out[group] = when
+        return out
 
     def metric_groups(self) -> dict[str, pl.Group]:
         """Metric name -> the poll group that reads it, for this session's plan (built once per plan)."""
@@ -232,7 +243,7 @@ class MachinePoller:
     # ---- one session ---------------------------------------------------------------------------------
     async def _poll_session(self) -> None:
         static = await self._read_static()
-        self.read_at = {pl.Group.STATIC: time.time()}
+        self._read_at_by_due = {frozenset((pl.Group.STATIC,)): time.time()}
         paths = await self._paths.count(self.session)
         plan = pl.MachinePlan.build(self.machine.poll, static)
         for operation in self._unsupported(plan):
@@ -361,9 +372,7 @@ class MachinePoller:
         self.stats.record_cycle(mono_after - mono_before)
         mid_mono = (mono_before + mono_after) / 2
         mid_wall = (wall_before + wall_after) / 2
-        read_at = self.read_at
-        for group in groups:
-            read_at[group] = mid_wall
+        self._read_at_by_due[groups] = mid_wall
         clock_observed = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
         timestamp = self.clock.source_time_ms(mid_mono, mid_wall)
 

@@ -4,7 +4,7 @@ A broker that is down, refuses, cannot be resolved or rejects the credentials ma
 every few seconds; one line per attempt buries everything else (and at INFO it hid the outage). So the
 first failure of an outage is one WARNING naming host:port and the reason; while it lasts, one WARNING a
 minute with the count of failed attempts; when the connection is up again, one line saying how long it
-was down. A change of reason (refused -> not authorised) is worth a line of its own.
+was down. A new reason (refused -> not authorised) is worth a line of its own, once per outage.
 
 The tracker also keeps what the status page, status.json and systemd's STATUS= show: connected since or
 down since, and the last error.
@@ -95,7 +95,7 @@ class BrokerTrouble:
         self.last_error = ""
         self.reason = ""
         self.failed_attempts = 0  # in this outage
-        self._reported_reason = ""  # the reason of the last WARNING of this outage
+        self._reported: set[str] = set()  # the reasons this outage has said (a flapping cause says each once)
         self._last_line_at = -float("inf")
         self._since_line = 0  # failed attempts since the last line
 
@@ -111,8 +111,8 @@ class BrokerTrouble:
         self.last_error = f"{what}: {error}" if str(error) else what
         self.reason = reason
         now = self._clock()
-        if reason != self._reported_reason:
-            self._reported_reason = reason
+        if reason not in self._reported:
+            self._reported.add(reason)
             self._line(now, "MQTT %s host=%s port=%s broker=%s client_id=%s reason=%s error=%s%s; retrying, "
                        "summarised once a minute while it lasts", what, *self._host_port(), self.address,
                        self.client_id, reason, error, f" hint={extra}" if extra else "")
@@ -126,7 +126,7 @@ class BrokerTrouble:
 
     def up(self) -> str:
         """The session is up (CONNACK accepted); returns the line to log ("" when there was no outage)."""
-        was_down = self.failed_attempts > 0 or bool(self._reported_reason)
+        was_down = self.failed_attempts > 0 or bool(self._reported)
         line = ""
         if was_down:
             line = (f"MQTT broker available again broker={self.address} client_id={self.client_id} down_for="
@@ -135,7 +135,7 @@ class BrokerTrouble:
         self.since = self._wall()
         self.failed_attempts = 0
         self._since_line = 0
-        self._reported_reason = ""
+        self._reported.clear()
         self._last_line_at = -float("inf")
         return line
 
@@ -143,7 +143,7 @@ class BrokerTrouble:
         """An established session ended without our asking: an outage starts (the caller logs the line)."""
         self.down(reason)
         self.reason = LOST
-        self._reported_reason = LOST
+        self._reported = {LOST}
         self._last_line_at = self._clock()
 
     def down(self, reason: str = "") -> None:

@@ -85,6 +85,12 @@ def test_a_new_reason_is_said_at_once(caplog: pytest.LogCaptureFixture) -> None:
     trouble.failed("connection refused", "Not authorized")
     lines = warnings(caplog)
     assert len(lines) == 2 and "reason=not authorised" in lines[1], lines
+    for _ in range(5):  # a cause that flaps between two reasons says each once, not every attempt
+        clocks.advance(5)
+        trouble.failed("connect failed", ConnectionRefusedError(111, "Connection refused"))
+        clocks.advance(5)
+        trouble.failed("connection refused", "Not authorized")
+    assert len(warnings(caplog)) == 2
 
 
 def test_a_lost_session_starts_an_outage_measured_from_the_loss(caplog: pytest.LogCaptureFixture) -> None:
