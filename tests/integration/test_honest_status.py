@@ -30,7 +30,7 @@ from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for, free_port, mosquitto_binary, port_open
 from tests.integration.mqtt_observer import Observer
 from tests.integration.test_status_http import config_text, http_get
-from tests.integration.test_status_page import chromium, run_browser
+from tests.integration.test_status_page import SCREENSHOT, chromium, run_browser
 
 pytestmark = pytest.mark.integration
 
@@ -150,6 +150,9 @@ async def test_the_page_greys_a_stale_value_and_shows_the_gateway(mosquitto: Mos
         assert re.search(r'<dd id="gw-local_time">\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d</dd>', dom)
         assert (f'<dd id="broker-detail" class="up">broker {mosquitto.host}:{mosquitto.port} connected since '
                 in dom)
+        if SCREENSHOT:
+            await run_browser(binary, f"http://127.0.0.1:{http_port}/", f"--screenshot={SCREENSHOT}",
+                              "--window-size=1400,640")
 
 
 def broker_lines(caplog: pytest.LogCaptureFixture, address: str, level: int) -> list[str]:
