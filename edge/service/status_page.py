@@ -62,9 +62,8 @@ class RateMeter:
         return self._rate.get(machine_id)
 
 
-def value_entries(poller: Any, names: list[str], wall_now: float) -> list[dict[str, Any]]:
+def value_entries(poller: Any, values: Mapping[str, Any], names: list[str], wall_now: float) -> list[dict[str, Any]]:
     """Each value with its quality and age (edge.service.value_freshness): never GOOD from a dead session."""
-    values = poller.last_values()
     groups = poller.metric_groups()
     read_at = poller.read_at
     plan = poller.plan
@@ -76,9 +75,8 @@ def value_entries(poller: Any, names: list[str], wall_now: float) -> list[dict[s
         group = groups.get(name)
         fresh = freshness(sample.quality, online=online, last_read=read_at.get(group),
                           changed_at=sample.timestamp_ms / 1000, period_s=periods.get(group), now=wall_now)
-        entry = {"name": name, "value": value_text(sample.value), "quality": fresh.quality,
-                 "age_s": round(fresh.age_s, 1), "last_good": _iso(fresh.last_good)}
-        out.append(entry)
+        out.append({"name": name, "value": value_text(sample.value), "quality": fresh.quality,
+                    "age_s": round(fresh.age_s, 1), "last_good": _iso(fresh.last_good)})
     return out
 
 
@@ -108,7 +106,7 @@ def _machine(machine_id: str, poller: Any, meter: RateMeter, now: float, wall_no
         "dropped": poller.dropped,
         "alarms": [{"number": a.number, "type": a.type, "axis": a.axis, "message": a.message}
                    for a in poller.active_alarms],
-        "values": value_entries(poller, shown, wall_now),
+        "values": value_entries(poller, values, shown, wall_now),
     }
 
 
@@ -156,7 +154,7 @@ dt{color:#555}dd{margin:0}small{color:#777}.stale{color:#999;font-style:italic}
 """
 
 # Redraws the page from /status.json every second. Text goes in with textContent only (no HTML from data).
-_SCRIPT = """
+_SCRIPT = GATEWAY_SCRIPT + """
 const cell = (row, text, cls) => { const td = row.insertCell(); td.textContent = text;
   if (cls) td.className = cls; return td; };
 const rate = (m) => (m.achieved_hz === null ? "measuring" : m.achieved_hz.toFixed(2)) + " / "
@@ -206,7 +204,7 @@ async function refresh() {
 }
 setInterval(refresh, __REFRESH_MS__);
 refresh();
-""".replace("__REFRESH_MS__", str(REFRESH_MS)) + GATEWAY_SCRIPT
+""".replace("__REFRESH_MS__", str(REFRESH_MS))
 
 _COLUMNS = ("machine", "CNC session", "series", "status reads achieved / planned", "live values", "active alarms",
             "dropped functions", "failing functions, last error")
