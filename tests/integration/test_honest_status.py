@@ -127,6 +127,20 @@ async def test_a_dropped_session_is_stale_in_status_json_and_to_a_late_json_subs
             again.close()
 
 
+async def test_after_a_clean_stop_a_late_json_subscriber_reads_stale(mosquitto: Mosquitto, observer: Observer,
+                                                                      tmp_path: Path) -> None:
+    async with one_machine(mosquitto, tmp_path) as (_, http_port, __):
+        await async_wait_for(lambda: machine_good(http_port), 20, interval=0.1, message="m1's values GOOD")
+        await async_wait_for(lambda: qualities(observer.snapshot()), 10, message="m1's retained state")
+    topics = set(qualities(observer.snapshot()))
+    late = Observer(mosquitto, (f"{STATE}#",))
+    try:
+        await async_wait_for(lambda: set(qualities(late.snapshot())) == topics, 10, message="retained state")
+        assert set(qualities(late.snapshot()).values()) == {"STALE"}
+    finally:
+        late.close()
+
+
 async def test_the_page_greys_a_stale_value_and_shows_the_gateway(mosquitto: Mosquitto, tmp_path: Path) -> None:
     binary = chromium()
     if binary is None:
