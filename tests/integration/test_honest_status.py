@@ -225,6 +225,10 @@ async def test_a_refusing_broker_is_one_warning_naming_it_and_shown_down_until_i
             assert (broker_doc["connected"], broker_doc["address"]) == (False, address), broker_doc
             assert broker_doc["down_since"] and "Connection refused" in broker_doc["last_error"]
             assert doc["gateway"]["broker_connected"] is False
+            status, _, body = await http_get(http_port, "/healthz")
+            reasons = json.loads(body)["reasons"]
+            assert status == 503 and any(f"broker {address} DOWN since" in r and "Connection refused" in r
+                                         for r in reasons), reasons
             await async_wait_for(lambda: any(f"broker {address} DOWN since" in s and "Connection refused" in s
                                              for s in read_statuses()), 10, message="STATUS= says the broker is down")
 
