@@ -6,6 +6,7 @@ import asyncio
 import logging
 import os
 import random
+import re
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -263,5 +264,31 @@ async def test_an_unresolvable_broker_name_is_one_warning_saying_so(tmp_path: Pa
         await async_wait_for(lambda: attempts_logged(caplog, "connect failed") >= 4, 20, message="four attempts")
         warnings = broker_warnings(caplog, "no-such-broker.invalid:1883")
         assert len(warnings) == 1 and "reason=unresolvable" in warnings[0], warnings
+    finally:
+        await pub.stop()
+
+
+async def test_a_broker_that_goes_away_is_said_twice_then_once_more_when_it_is_back(
+        mosquitto: Mosquitto, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Lost (one WARNING), refused on reconnect (one WARNING with the reason), quiet meanwhile, back (one line
+    with how long it was down)."""
+    caplog.set_level(logging.DEBUG, logger="edge.publish.mqtt")
+    pub = Publisher(settings(mosquitto, tmp_path, formats=frozenset({"json"})))
+    await pub.start()
+    try:
+        assert await pub.wait_ready()
+        mosquitto.stop()
+        await async_wait_for(lambda: attempts_logged(caplog, "connect failed") >= 8, 20, message="eight attempts")
+        warnings = mqtt_warnings(caplog)
+        assert len(warnings) == 2, warnings
+        assert "connection lost" in warnings[0] and "reason=refused" in warnings[1], warnings
+        (_, state), = pub.broker_states()
+        assert not state.connected and state.failed_attempts >= 8 and "Connection refused" in state.last_error
+        mosquitto.start()
+        await async_wait_for(lambda: pub.connected, 15, message="reconnected")
+        back = [r.getMessage() for r in caplog.records if "available again" in r.getMessage()]
+        assert len(back) == 1 and f"broker={mosquitto.host}:{mosquitto.port}" in back[0], back
+        assert re.search(r"down_for=\d+s failed_attempts=\d+", back[0]), back[0]
+        assert len(mqtt_warnings(caplog)) == 2
     finally:
         await pub.stop()
