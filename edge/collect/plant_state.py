@@ -17,7 +17,7 @@ import asyncio
 import logging
 import time
 import zlib
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo
@@ -88,7 +88,7 @@ class PlantState:
         return [*_ended_samples(ended), *self.counter.totals().samples()]
 
     # ---- the minute task and saving --------------------------------------------------------------------
-    async def run_minutes(self, now_ms: Callable[[], int], publish: Callable[[list[Sample]], Awaitable[None]],
+    async def run_minutes(self, now_ms: Callable[[], int], publish: Callable[[Sequence[Sample]], Awaitable[None]],
                           wall: Callable[[], float] = time.time) -> None:
         """Once a minute (and at local midnight): count, publish, save. Runs until cancelled."""
         while True:

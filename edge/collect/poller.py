@@ -165,10 +165,15 @@ class MachinePoller:
         if changed and self.online:
             await self.sink.device_data(self.machine_id, changed)
 
+    async def _publish_born(self, samples: Sequence[Sample]) -> None:
+        """Publish while the device is born; before that, the birth will carry the values (not filtered away)."""
+        if self.online and (changed := self._changes.filter(samples)):
+            await self.sink.device_data(self.machine_id, changed)
+
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> None:
         """Connect (with backoff), poll until the session breaks, go offline, repeat. Cancel to stop."""
-        minutes = asyncio.create_task(self.plant_state.run_minutes(self.cnc_time_ms, self.report),
+        minutes = asyncio.create_task(self.plant_state.run_minutes(self.cnc_time_ms, self._publish_born),
                                       name=f"utilisation-{self.machine_id}")
         try:
             await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
