@@ -173,22 +173,26 @@ class MachinePoller:
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> None:
         """Connect (with backoff), poll until the session breaks, go offline, repeat. Cancel to stop."""
+        self._start_minutes()
+        await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
+        while True:
+            await self._connect()
+            try:
+                await self._poll_session()
+            except FocasError as exc:
+                log.warning("session lost machine=%s error=%s", self.machine_id, exc)
+                self.last_error = f"session lost: {exc}"
+            finally:
+                await self._go_offline()
+                await self.session.reset()
+
+    def _start_minutes(self) -> None:
+        """The utilisation minute publish, a task of its own that ends with the run task."""
         minutes = asyncio.create_task(self.plant_state.run_minutes(self.cnc_time_ms, self._publish_born),
                                       name=f"utilisation-{self.machine_id}")
-        try:
-            await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
-            while True:
-                await self._connect()
-                try:
-                    await self._poll_session()
-                except FocasError as exc:
-                    log.warning("session lost machine=%s error=%s", self.machine_id, exc)
-                    self.last_error = f"session lost: {exc}"
-                finally:
-                    await self._go_offline()
-                    await self.session.reset()
-        finally:
-            minutes.cancel()
+        run_task = asyncio.current_task()
+        if run_task is not None:
+            run_task.add_done_callback(lambda _: minutes.cancel())
 
     async def close(self) -> None:
         """Save the utilisation counters, send the close PDU (the run task must already be cancelled)."""
