@@ -120,3 +120,28 @@ async def test_execution_follows_the_machine_on_sparkplug_and_json_and_utilisati
         finally:
             daemon.request_stop()
             assert await asyncio.wait_for(task, 20) == 0
+
+
+async def test_each_path_of_a_two_path_lathe_has_its_own_execution_and_utilisation(
+        mosquitto: Mosquitto, observer: Observer, tmp_path: Path) -> None:
+    """Path 2 is its own device (`m1-path2`, as for Status/Run): its own Execution, counters and state file."""
+    async with Fleet([MachineSpec(profile="31i-2p", cycle=ALWAYS_CUTTING, seed=0)], base_port=0) as fleet:
+        machines = (f"  - {{id: m1, host: 127.0.0.1, port: {fleet[0].port}, paths: 2, "
+                    "poll: {periods: {status: 0.1s}}}\n")
+        daemon = Daemon(parse_config(daemon_config(mosquitto, tmp_path, machines)))
+        task = asyncio.create_task(daemon.run())
+        try:
+            for device in ("m1", "m1-path2"):
+                await observer.wait_topic(f"focas/{device}/state/Status/Execution", timeout=15)
+                await observer.wait_topic(f"focas/{device}/state/Utilisation/Day", timeout=15)
+            second = fleet[0].state.for_path(2)
+            assert second is not None
+            second.set_feed_hold(True)  # path 2 held, path 1 cuts on
+            await async_wait_for(
+                lambda: json_values(observer, "m1-path2", "Status/Execution")[-1]["value"] == "FEED_HOLD",
+                timeout=10, message="path 2 in feed hold")
+            assert json_values(observer, "m1", "Status/Execution")[-1]["value"] in ("ACTIVE", "WAIT")
+        finally:
+            daemon.request_stop()
+            assert await asyncio.wait_for(task, 20) == 0
+    assert {p.name for p in (tmp_path / "utilisation").iterdir()} == {"m1.json", "m1-path2.json"}
