@@ -25,7 +25,7 @@ from zoneinfo import ZoneInfo
 from edge.collect import utilisation as ut
 from edge.collect.execution import AVAILABILITY, AVAILABLE, OFFLINE, UNAVAILABLE, UNKNOWN, derive
 from edge.focas.model import StatInfo
-from edge.samples import MetricSpec, Sample
+from edge.samples import MetricSpec, Quality, Sample, new_sample
 
 log = logging.getLogger(__name__)
 
@@ -79,13 +79,20 @@ class PlantState:
         return [Sample(AVAILABILITY.name, UNAVAILABLE, AVAILABILITY.type, at_ms), *samples]
 
     def minute(self, at_ms: int) -> list[Sample]:
-        """The minute publish: the current state counted up to now, every counter."""
-        ended = self.counter.advance(at_ms)
-        return [*_ended_samples(ended), *self.counter.totals().samples()]
+        """The minute publish: the current state counted up to now (a new day: every counter)."""
+        state = self.counter.state
+        return self._moved(state, self.counter.advance(at_ms), at_ms)
 
     def _switch(self, state: str, at_ms: int) -> list[Sample]:
-        ended = self.counter.switch(state, at_ms)
-        return [*_ended_samples(ended), *self.counter.totals().samples()]
+        """Only the counter of the state that ended moved (at midnight: every counter, from zero)."""
+        ended_state = self.counter.state
+        return self._moved(ended_state, self.counter.switch(state, at_ms), at_ms)
+
+    def _moved(self, state: str, ended: list[ut.DayTotals], at_ms: int) -> list[Sample]:
+        if ended:
+            return [*_ended_samples(ended), *self.counter.totals().samples()]
+        spec = ut.COUNTERS[state]
+        return [new_sample(spec.name, round(self.counter.seconds[state], 3), spec.type, at_ms, Quality.GOOD)]
 
     # ---- the minute task and saving --------------------------------------------------------------------
     async def run_minutes(self, now_ms: Callable[[], int], publish: Callable[[Sequence[Sample]], Awaitable[None]],
