@@ -22,6 +22,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from edge.publish.broker_trouble import BrokerState
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import DroppingSpool, ReplaySpool, Spool, SpoolWriter
 from edge.publish.inbound import (
@@ -157,6 +158,10 @@ class Publisher:
     def connected(self) -> bool:
         conns = self._connections()
         return bool(conns) and all(c.connected for c in conns)
+
+    def broker_states(self) -> list[tuple[str, BrokerState]]:
+        """Each connection's broker session as (format, state): connected or down since when, the last error."""
+        return [(link.fmt, link.conn.trouble.state()) for link in self._links() if link.conn is not None]
 
     async def stop(self) -> None:
         """DDEATH every online device, NDEATH, DISCONNECT (MQTT 5: reason 0x04); JSON: offline, retained."""
