@@ -33,17 +33,19 @@ from edge.publish import payload
 from edge.publish.credentials import apply_credentials
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import DroppingSpool, Spool
-from edge.publish.inbound import CommandSource
+from edge.publish.inbound import CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.spool import open_spool
 
 __all__ = [
     "CommandSource",
+    "DeviceCommands",
     "DroppingSpool",
     "ForwardingPolicy",
     "PublishSettings",
     "Publisher",
+    "RefusedMetric",
     "Spool",
     "apply_credentials",
     "open_spool",

@@ -30,7 +30,6 @@ from edge.publish.inbound import (
     CommandSource,
     DeviceCommandHandler,
     JsonCommandHandler,
-    RefusedCommandHandler,
 )
 from edge.publish.json_session import JsonSession
 from edge.publish.link import DeliveryLink
@@ -100,14 +99,6 @@ class Publisher:
     @on_json_command.setter
     def on_json_command(self, handler: JsonCommandHandler | None) -> None:
         self._handlers.json = handler
-
-    @property
-    def on_device_command_refused(self) -> RefusedCommandHandler | None:
-        return self._handlers.refused
-
-    @on_device_command_refused.setter
-    def on_device_command_refused(self, handler: RefusedCommandHandler | None) -> None:
-        self._handlers.refused = handler
 
     @property
     def node_metrics_source(self) -> Callable[[], Sequence[Sample]] | None:

@@ -62,9 +62,8 @@ class Daemon:
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
         self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
-        self.publisher.on_device_command = self.commands.on_device_command
+        self.publisher.on_device_command = self.commands.on_device_commands
         self.publisher.on_json_command = self.commands.on_json_command
-        self.publisher.on_device_command_refused = self.commands.on_device_command_refused
         self.publisher.node_metrics_source = self.node_metrics
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stop = asyncio.Event()
