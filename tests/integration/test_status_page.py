@@ -82,7 +82,7 @@ async def test_status_json_and_the_server_rendered_page(mosquitto: Mosquitto, tm
         assert status == 200 and headers["content-type"] == "application/json"
         doc = json.loads(body)
         assert doc["gateway"] == {"broker_connected": True, "spool_depth": 0, "writes_enabled": False,
-                                  "machines": 2, "machines_connected": 2}
+                                  "machines": 2, "machines_connected": 2, "identity_conflict": None}
         m1, m2 = doc["machines"]
         assert (m1["id"], m1["connected"], m1["series"], m1["planned_hz"]) == ("m1", True, "30i-BM", 4.0)
         assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", m1["since"])
