@@ -3,7 +3,11 @@ polls what each control answered, no more."""
 
 from __future__ import annotations
 
+import contextlib
+import socketserver
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -63,6 +67,50 @@ def test_an_unreachable_cnc_is_a_comment_and_exit_1(tmp_path: Path, capsys: pyte
     assert "127.0.0.1:1: connect" in capsys.readouterr().err
     text = out.read_text()
     assert "# NOT REACHED 127.0.0.1:1" in text
+    assert [m.id for m in load_config(out, environ={}).machines] == [f"cnc-127-0-0-1-{fleet[0].port}"]
+
+
+class _Banner(socketserver.BaseRequestHandler):
+    """An SSH server's greeting: it speaks first."""
+
+    def handle(self) -> None:
+        self.request.sendall(b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n")
+        self.request.recv(64)
+
+
+class _Http(socketserver.BaseRequestHandler):
+    """A web server: silent until spoken to, then not FOCAS."""
+
+    def handle(self) -> None:
+        self.request.recv(64)
+        self.request.sendall(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+
+
+@contextlib.contextmanager
+def serving(handler: type[socketserver.BaseRequestHandler]) -> Iterator[int]:
+    with socketserver.ThreadingTCPServer(("127.0.0.1", 0), handler) as server:
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        try:
+            yield server.server_address[1]
+        finally:
+            server.shutdown()
+            thread.join()
+
+
+def test_an_address_that_answers_but_not_as_focas_is_a_comment_saying_what_answered(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet([MachineSpec(profile="16i")], base_port=0)) as fleet, serving(_Banner) as ssh, \
+            serving(_Http) as web:
+        code = main(["init", f"127.0.0.1:{fleet[0].port}", f"127.0.0.1:{ssh}", f"127.0.0.1:{web}", "--timeout", "2",
+                     "-o", str(out)])
+    assert code == EXIT_FAILURE
+    text = out.read_text()
+    assert f"  # 127.0.0.1:{ssh} answered but not FOCAS: it sent 'SSH-2.0-OpenSSH_9.2p1 Debian-2'\n" in text
+    assert f"  # 127.0.0.1:{web} answered but not FOCAS: the FOCAS hello got: " in text and "('HTTP')" in text
+    assert "NOT REACHED" not in text
+    assert f"127.0.0.1:{ssh} answered but not FOCAS" in capsys.readouterr().err
     assert [m.id for m in load_config(out, environ={}).machines] == [f"cnc-127-0-0-1-{fleet[0].port}"]
 
 
