@@ -6,7 +6,8 @@ under a second (a birth per connect: 105 NBIRTH in 40 s seen); with distinct cli
 hosts see two interleaved seq streams and ask for rebirths. The sessions feed what they see here:
 - another session's NBIRTH for our id (a payload we did not send), or an NDEATH with a bdSeq we never used;
 - the broker taking our session: MQTT 5 reason "Session taken over", or (3.1.1, no reason) several sessions
-  in a row closed by the broker soon after their CONNACK.
+  in a row closed by the broker soon after their CONNACK, each time taking us straight back (edge.publish.mqtt
+  reports a loss only then: a broker restart refuses the first reconnect) and not for a missed keepalive.
 The first evidence is one ERROR naming the id and what was seen; while a conflict lasts (evidence within
 `hold_s`) reconnects and rebirths wait at least `backoff_s` (one a minute), and every piece of evidence is
 counted (focas_edge_identity_conflicts_total). Without evidence for `hold_s` the conflict is over (INFO).
@@ -27,6 +28,7 @@ log = logging.getLogger(__name__)
 BACKOFF_S = 60.0  # while in conflict: at most one reconnect and one rebirth per this many seconds
 SHORT_LOSSES = 3  # sessions in a row the broker closed within hold_s of their CONNACK (3.1.1: no reason)
 TAKEN_OVER = "session taken over"  # MQTT 5 DISCONNECT reason 0x8E, as paho spells it (lower-cased)
+KEEPALIVE = "keep alive timeout"  # paho's reason when no PINGRESP came: the network, not another client
 
 
 def bdseq_of(data: bytes) -> int | None:
@@ -119,7 +121,7 @@ class IdentityGuard:
         if TAKEN_OVER in reason.lower():
             self._evidence(f"the broker handed client id {client_id} to another connection ({reason})")
             return
-        if lasted_s >= self.hold_s:
+        if lasted_s >= self.hold_s or KEEPALIVE in reason.lower():
             self._short_losses.pop(client_id, None)
             return
         if self.active:

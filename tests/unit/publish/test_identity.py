@@ -83,6 +83,8 @@ def test_three_short_sessions_of_one_client_id_are_a_conflict_long_ones_reset(
     guard.session_lost("cid", guard.hold_s + 5, "Unspecified error")  # a long session: a network blip
     guard.session_lost("cid-json", 0.3, "Unspecified error")  # another connection counts on its own
     guard.session_lost("cid", 0.4, "Unspecified error")
+    guard.session_lost("cid", 0.4, "Keep alive timeout")  # the network, not another client: starts over
+    guard.session_lost("cid", 0.4, "Unspecified error")
     assert not guard.active and not errors(caplog)
     guard.session_lost("cid", 0.4, "Unspecified error")
     guard.session_lost("cid", 0.5, "Unspecified error")
