@@ -10,10 +10,12 @@ ids (each sees the other's NBIRTH).
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import pytest
 
+from edge.publish import Publisher, PublishSettings
 from edge.sim.fleet import Fleet, MachineSpec
 from tests.helpers import Mosquitto, async_wait_for, free_port, port_open
 from tests.integration.mqtt_observer import Observer
@@ -111,3 +113,29 @@ async def test_another_sessions_nbirth_for_our_id_is_an_identity_conflict(
     finally:
         for daemon in daemons:
             await daemon.kill()
+
+
+async def test_a_restarting_broker_is_not_taken_for_a_clone(mosquitto: Mosquitto, tmp_path: Path,
+                                                             caplog: pytest.LogCaptureFixture) -> None:
+    """Three short sessions in a row, but each time the broker was away before it took the gateway back."""
+    caplog.set_level(logging.INFO)
+    settings = PublishSettings(host=mosquitto.host, port=mosquitto.port, state_dir=tmp_path, group_id="plant",
+                               edge_node_id="gw", client_id="focas-edge-plant-gw", reconnect_max_s=0.5)
+    publisher = Publisher(settings)
+    await publisher.start()
+    try:
+        assert await publisher.wait_ready(10)
+        def refused() -> int:
+            return sum("connect failed" in r.getMessage() for r in caplog.records)
+
+        for restart in range(4):
+            target = refused() + 2
+            mosquitto.stop()
+            await async_wait_for(lambda: refused() >= target, 10,  # noqa: B023 (awaited in this iteration)
+                                 message="both connections refused while it is away")
+            mosquitto.start()
+            assert await publisher.wait_ready(15), f"back after restart {restart + 1}"
+        assert publisher.identity.count == 0 and publisher.identity.conflict is None
+        assert not [r for r in caplog.records if "identity conflict" in r.getMessage()]
+    finally:
+        await publisher.stop()
