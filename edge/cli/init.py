@@ -72,6 +72,20 @@ def _ids(args: argparse.Namespace) -> list[str]:
     return ids
 
 
+def _check_hosts(args: argparse.Namespace) -> None:
+    """A mistyped address (192.168.10.577) is a usage error naming it, before anything is probed."""
+    from edge.config.fields import check_host
+    from edge.focas.connect import parse_address
+
+    for address in [*args.addresses, args.broker]:
+        host = parse_address(address).host
+        if host:  # empty for unix:/path
+            try:
+                check_host(host)
+            except ValueError as exc:
+                raise ValueError(f"{address}: {exc}") from None
+
+
 def _broker(text: str) -> tuple[str, int]:
     from edge.focas.connect import parse_address
 
@@ -195,6 +209,7 @@ def handle(args: argparse.Namespace) -> int:
             print(f"focas-edge init: warning: {warning}", file=sys.stderr)
     try:
         ids = _ids(args)
+        _check_hosts(args)
         broker_host, broker_port = _broker(args.broker)
         node = args.node or re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()) or "gateway"
         from edge.config import check_sparkplug_id

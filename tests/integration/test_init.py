@@ -119,6 +119,7 @@ def test_an_address_that_answers_but_not_as_focas_is_a_comment_saying_what_answe
     (["--names", "a,A"], "machine id(s) given twice (ids ignore case): A, a"),
     (["--names", "a,b/c"], "'b/c' contains /"),
     (["--group", "x#"], "'x#' contains #"),
+    (["--broker", "mqtt..plant"], "mqtt..plant: 'mqtt..plant' is not a valid host name"),
 ])
 def test_bad_usage_is_refused_before_anything_is_probed(extra: list[str], message: str, tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
@@ -158,3 +159,11 @@ def test_init_writes_the_bundled_units_out_too_running_this_installation(
                 f"# {here} is under a home directory: read-only, not hidden\n", "") == shipped
         assert main(args) == EXIT_USAGE, "the units are not overwritten without --force"
         assert "use --force" in capsys.readouterr().err
+
+
+def test_a_mistyped_cnc_address_is_refused_before_anything_is_probed(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["init", "192.168.10.577", "-o", str(tmp_path / "x.yaml")]) == EXIT_USAGE
+    assert "192.168.10.577: '192.168.10.577' is not a valid IPv4 address (577 is more than 255)" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "x.yaml").exists()
