@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 from pathlib import Path
 
 import pytest
@@ -21,6 +22,7 @@ from tests.helpers import Mosquitto, async_wait_for, free_port, port_open
 from tests.integration.mqtt_observer import Observer
 from tests.integration.test_signals import DaemonProcess
 from tests.integration.test_status_http import http_get, samples
+from tests.integration.test_status_page import chromium, run_browser
 
 pytestmark = pytest.mark.integration
 
@@ -91,6 +93,13 @@ async def test_a_taken_over_client_id_is_one_error_and_a_backoff_not_a_birth_sto
             assert conflict["identity"] == "Sparkplug id plant/gw" and conflict["count"] >= 1, conflict
             _, _, page = await http_get(http_port, "/")
             assert b"CONFLICT since" in page
+            binary = chromium()
+            if binary is not None:  # the page's script redraws the line from status.json without failing
+                dom = await run_browser(binary, f"http://127.0.0.1:{http_port}/", "--dump-dom")
+                updates = re.search(r'data-updates="(\d+)"', dom)
+                assert updates and int(updates.group(1)) >= 2, dom[:2000]
+                assert re.search(r'<dd id="identity" class="down">CONFLICT since [^<]*Sparkplug id plant/gw', dom), \
+                    dom[:2000]
     finally:
         for daemon in daemons:
             await daemon.kill()

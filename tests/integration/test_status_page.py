@@ -121,5 +121,6 @@ async def test_chromium_shows_what_the_script_fetched(mosquitto: Mosquitto, tmp_
         m2 = re.search(r'<tr id="machine-m2">(.*?)</tr>', dom, re.S)
         assert m2 is not None and "ReadMacros" in m2.group(1)
         assert '<span id="broker" class="up">connected</span>' in dom
+        assert '<dd id="identity" class="muted">none</dd>' in dom  # no other gateway with this identity
         if SCREENSHOT:
             await run_browser(binary, url, f"--screenshot={SCREENSHOT}", "--window-size=1400,640")
