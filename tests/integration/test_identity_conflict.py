@@ -98,8 +98,8 @@ async def test_a_taken_over_client_id_is_one_error_and_a_backoff_not_a_birth_sto
                 dom = await run_browser(binary, f"http://127.0.0.1:{http_port}/", "--dump-dom")
                 updates = re.search(r'data-updates="(\d+)"', dom)
                 assert updates and int(updates.group(1)) >= 2, dom[:2000]
-                assert re.search(r'<dd id="identity" class="down">CONFLICT since [^<]*Sparkplug id plant/gw', dom), \
-                    dom[:2000]
+                line = r'<dd id="identity-conflict" class="down">CONFLICT since [^<]*Sparkplug id plant/gw'
+                assert re.search(line, dom), dom[:2000]
     finally:
         for daemon in daemons:
             await daemon.kill()

@@ -167,3 +167,24 @@ def test_a_mistyped_cnc_address_is_refused_before_anything_is_probed(tmp_path: P
     assert "192.168.10.577: '192.168.10.577' is not a valid IPv4 address (577 is more than 255)" in \
         capsys.readouterr().err
     assert not (tmp_path / "x.yaml").exists()
+
+
+def test_init_acl_writes_the_broker_acl_beside_the_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet([MachineSpec(profile="30i")], base_port=0)) as fleet:
+        code = main(["init", f"127.0.0.1:{fleet[0].port}", "--names", "m1", "--node", "gw-7", "--group", "site",
+                     "-o", str(out), "--acl", "--acl-users", "line2-edge:mes-line2"])
+    assert code == EXIT_OK, capsys.readouterr().err
+    assert "mosquitto.acl" in capsys.readouterr().err
+    acl = (tmp_path / "mosquitto.acl").read_text().splitlines()
+    gateway = acl[acl.index("user line2-edge") + 1:acl.index("user mes-line2")]
+    mes = acl[acl.index("user mes-line2") + 1:]
+    assert "topic write spBv1.0/site/DDATA/gw-7/+" in gateway and "topic read spBv1.0/site/DCMD/gw-7/+" in gateway
+    assert not any("CMD" in line or line.endswith("/cmd") for line in gateway if line.startswith("topic write"))
+    commands = [line for line in mes if line.startswith("topic write")]
+    assert commands == ["topic write spBv1.0/site/NCMD/gw-7", "topic write spBv1.0/site/DCMD/gw-7/+",
+                        "topic write focas/site/gw-7/+/cmd"]  # the default JSON prefix names the gateway
+    # The file exists now: a second run without --force refuses to overwrite it.
+    assert main(["init", "127.0.0.1:1", "-o", str(tmp_path / "other.yaml"), "--acl",
+                 str(tmp_path / "mosquitto.acl")]) == EXIT_USAGE
+    assert "exists" in capsys.readouterr().err
