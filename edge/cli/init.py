@@ -13,6 +13,7 @@ from typing import Any
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli.acl import account_names
 
 DEFAULT_TIMEOUT = 5.0
 DEFAULT_GROUP = "plant"
@@ -205,8 +206,8 @@ def handle(args: argparse.Namespace) -> int:
     acl = _acl_path(args, output)
     if acl is not None and acl.exists() and not args.force:
         return _usage(f"{acl} exists; use --force to overwrite it")
-    users = args.acl_users.split(":")
-    if len(users) != 2 or not all(users) or any(c in args.acl_users for c in " #+/") or users[0] == users[1]:
+    users = account_names(args.acl_users)
+    if users is None:
         return _usage(f"--acl-users {args.acl_users!r}: expected GATEWAY:MES, two different account names")
     if args.units is not None:
         from edge.config.bundled import write_bundled
