@@ -67,6 +67,8 @@ class MachineConfig(_Model):
     # `<id>-path<n>` (see path_devices). `path` is the one this entry's session reads.
     paths: int = Field(default=1, ge=1, le=MAX_PATHS)
     path: int = Field(default=1, ge=1, le=MAX_PATHS)
+    # The gateway that polls this machine, in a fleet file with `gateways:` (edge.config.gateways).
+    gateway: str | None = None
 
     def path_devices(self) -> list[MachineConfig]:
         """This machine, then one entry per further path: same settings, id `<id>-path<n>`, path n."""

@@ -2,7 +2,8 @@
 
 SIGTERM/SIGINT: stop polling, DDEATH every machine, NDEATH, DISCONNECT, close PDUs to the CNCs, exit 0.
 SIGHUP: reload the config without dropping the broker session; machines added, removed or changed get
-their DBIRTH/DDEATH. The systemd watchdog is pinged only while every poll loop makes progress.
+their DBIRTH/DDEATH (in a fleet file with `gateways:`, a machine moved to another gateway is one removed).
+The systemd watchdog is pinged only while every poll loop makes progress.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 from edge import ConfigError, __version__
 from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
 from edge.command import CommandService
-from edge.config import Config, MachineConfig, listen_port, load_config
+from edge.config import GATEWAY_ENV, Config, MachineConfig, listen_port, load_config
 from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
@@ -235,7 +236,7 @@ class Daemon:
             return
         self.notifier.reloading()
         try:
-            new = load_config(self.config_path)
+            new = load_config(self.config_path, gateway=self.config.gateway)
         except ConfigError as exc:
             log.error("reload refused, keeping the running config: %s", exc)
             self.notifier.ready("reload refused: bad config")
@@ -256,6 +257,10 @@ class Daemon:
                                                      self.config.alarms_for(old[i]) != new.alarms_for(fresh[i]))]
         removed = [i for i in old if i not in fresh]
         added = [i for i in fresh if i not in old]
+        owners = {machine: gateway for gateway, machines in new.fleet.items() for machine in machines}
+        for machine_id in removed:
+            if machine_id in owners:
+                log.info("reload: machine %s moved to gateway %s", machine_id, owners[machine_id])
         self.config = new
         self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
@@ -351,8 +356,13 @@ def _stale_limit(machine: MachineSettings) -> float:
         periods.status, periods.macros, periods.pmc)
 
 
-def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = None) -> int:
-    config = load_config(config_path)
+def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = None,
+               gateway: str | None = None) -> int:
+    """`gateway`: which gateway of a fleet file with `gateways:` this process is (kept across reloads)."""
+    config = load_config(config_path, gateway=gateway)
+    if config.fleet and gateway is None:  # without a name, load_config answers with an overview, not a box
+        raise ConfigError([f"the file lists gateways ({', '.join(config.fleet)}): say which one this is with "
+                           f"--gateway NAME or {GATEWAY_ENV}=NAME"], str(config_path))
     for warning in config.warnings:
         log.warning("config: %s", warning)
     unusable = state_dir_problem(config.resolved_state_dir)
