@@ -30,11 +30,11 @@ def module_of(filename: str) -> str:
     if filename.startswith("<"):
         return filename
     path = Path(filename).resolve()
-    if path.is_relative_to(REPO):
-        return ".".join(path.relative_to(REPO).with_suffix("").parts)
     for marker in ("site-packages", "dist-packages"):
         if marker in path.parts:
             return path.parts[path.parts.index(marker) + 1].removesuffix(".py")
+    if path.is_relative_to(REPO):
+        return ".".join(path.relative_to(REPO).with_suffix("").parts)
     if path.is_relative_to(STDLIB):
         parts = path.relative_to(STDLIB).with_suffix("").parts
         return "stdlib." + parts[0]

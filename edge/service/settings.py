@@ -71,9 +71,20 @@ def _machine_settings(config: Config, machine: MachineConfig, path_devices: tupl
         max_skew_s=machine.max_skew_s,
         path=machine.path,
         path_devices=path_devices,
-        poll=poll_settings(machine.poll, config.alarms_for(machine)),
+        poll=shared_poll(poll_settings(machine.poll, config.alarms_for(machine))),
         series=machine.series,
     )
+
+
+_POLLS: dict[PollSettings, PollSettings] = {}
+
+
+def shared_poll(poll: PollSettings) -> PollSettings:
+    """One object for equal poll settings: a fleet's machines mostly poll alike, and the metric names these
+    settings carry (and the plans built from them, edge.collect.plan) are then held once, not per machine."""
+    if len(_POLLS) >= 256:
+        _POLLS.clear()
+    return _POLLS.setdefault(poll, poll)
 
 
 def poll_settings(poll: PollPlan, alarms: AlarmsConfig) -> PollSettings:
