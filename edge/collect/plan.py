@@ -378,6 +378,20 @@ def metric_values(read: PlannedRead, result: object) -> list[tuple[MetricSpec, o
 
 
 ValueExtractor = Callable[[object], list[object]]
+_SHARED_EXTRACTORS: dict[int, tuple[PlannedRead, ValueExtractor]] = {}  # id(read) -> (read, its extractor)
+
+
+def shared_value_extractor(read: PlannedRead) -> ValueExtractor:
+    """value_extractor, one per read object for the whole process: the reads of a plan are shared by every
+    machine polling alike (MachinePlan.build), and an extractor depends on nothing else (it keeps no state)."""
+    found = _SHARED_EXTRACTORS.get(id(read))
+    if found is not None and found[0] is read:
+        return found[1]
+    if len(_SHARED_EXTRACTORS) >= SHARED_READS_LIMIT * 64:
+        _SHARED_EXTRACTORS.clear()
+    extractor = value_extractor(read)
+    _SHARED_EXTRACTORS[id(read)] = (read, extractor)
+    return extractor
 
 
 def value_extractor(read: PlannedRead) -> ValueExtractor:
