@@ -24,6 +24,7 @@ from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
+from edge.service.fd_limit import ensure_fd_limit, fds_needed
 from edge.service.gc_tuning import tune_collector
 from edge.service.opcua_output import opcua_output
 from edge.service.outputs import Outputs
@@ -341,6 +342,8 @@ def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = N
     unusable = state_dir_problem(config.resolved_state_dir)
     if unusable is not None:
         raise ConfigError([unusable], str(config_path))
+    devices = config.devices()
+    ensure_fd_limit(fds_needed(len(devices), sum(1 for d in devices if d.fwlib_host)))
 
     async def main() -> int:
         daemon = Daemon(config, config_path)
