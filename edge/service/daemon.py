@@ -232,8 +232,8 @@ class Daemon:
         if self.config_path is None:
             return
         self.notifier.reloading()
-        try:
-            new = load_config(self.config_path)
+        try:  # in a thread: parsing 1,000 machines takes seconds, and the poll loops must keep ticking meanwhile
+            new = await asyncio.to_thread(load_config, self.config_path)
         except ConfigError as exc:
             log.error("reload refused, keeping the running config: %s", exc)
             self.notifier.ready("reload refused: bad config")
