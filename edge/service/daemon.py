@@ -36,6 +36,9 @@ from edge.service.status_http import StatusServer
 log = logging.getLogger(__name__)
 
 NODE_METRICS_PERIOD_S = 5.0
+# Machines started per second at start-up: each start (connect, static reads, plan, DBIRTH) costs the loop
+# milliseconds, and 1,000 of them in the same second kept answers waiting past the request timeout.
+STARTS_PER_S = 200.0
 
 
 class Daemon:
@@ -111,8 +114,10 @@ class Daemon:
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
         await self._start_opcua()
-        for machine in self.config.devices():
-            self._start_machine(machine)
+        devices = self.config.devices()
+        spread = max(1.0, len(devices) / STARTS_PER_S)  # a fleet's first connects spread, not in one burst
+        for machine in devices:
+            self._start_machine(machine, spread)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
         background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
@@ -201,9 +206,9 @@ class Daemon:
             loop.add_signal_handler(signal.SIGHUP, self.request_reload)
 
     # ---- machines ------------------------------------------------------------------------------------
-    def _start_machine(self, machine: MachineConfig) -> None:
+    def _start_machine(self, machine: MachineConfig, spread_s: float = 1.0) -> None:
         poller = MachinePoller(machine_settings(self.config, machine), self.outputs, self.state_dir,
-                               self.session_factory, grid=self.tick_grid)
+                               self.session_factory, jitter_s=spread_s, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
         task.add_done_callback(self._poller_done)
