@@ -40,6 +40,10 @@ class LatencySubscriber:
         self.change_latency_s: list[float] = []
         self.sample_latency_s: list[float] = []
         self.stamp_error_s: list[float] = []
+        # `sample` split where the gateway encodes the message (the payload timestamp): CNC stamp -> encoded
+        # (the CNC's answer in transit and queued in the gateway), encoded -> received (broker, subscriber).
+        self.in_gateway_s: list[float] = []
+        self.to_subscriber_s: list[float] = []
         self.births: set[str] = set()
         self.birth_times: dict[str, float] = {}  # device -> receipt of its first DBIRTH
         self.dbirths = Counter[str]()  # every DBIRTH per device: a second one is a rebirth
@@ -99,6 +103,7 @@ class LatencySubscriber:
         if not metrics:
             return
         sample = received - metrics[0].timestamp / 1000
+        published = payload.timestamp / 1000  # the gateway's clock when it encoded the message
         stamp_alias = self._stamp_alias.get(device)
         clock_alias = self._clock_alias.get(device)
         change = error = None
@@ -109,6 +114,8 @@ class LatencySubscriber:
                 error = clock_macro_error(metric.timestamp / 1000, metric.double_value)
         with self._lock:
             self.sample_latency_s.append(sample)
+            self.in_gateway_s.append(published - metrics[0].timestamp / 1000)
+            self.to_subscriber_s.append(received - published)
             if change is not None:
                 self.change_latency_s.append(change)
             if error is not None:
@@ -140,7 +147,15 @@ class LatencySubscriber:
         with self._lock:
             change, sample = self.change_latency_s, self.sample_latency_s
             self.change_latency_s, self.sample_latency_s, self.stamp_error_s = [], [], []
+            self.in_gateway_s, self.to_subscriber_s = [], []
         return change, sample
+
+    def take_sample_split(self) -> tuple[list[float], list[float]]:
+        """The two parts of `sample` recorded so far: (in the gateway, to the subscriber); forgotten after."""
+        with self._lock:
+            split = self.in_gateway_s, self.to_subscriber_s
+            self.in_gateway_s, self.to_subscriber_s = [], []
+        return split
 
     def take_stamp_errors(self) -> list[float]:
         """Timestamp minus simulator clock, seconds, per clock-macro value recorded so far (and forget them)."""
