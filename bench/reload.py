@@ -34,7 +34,8 @@ def run_reload(machines: int, period_s: float, watch_s: float) -> dict[str, Any]
     """One start plus one reload adding a machine; every process it starts is stopped before it returns."""
     with contextlib.ExitStack() as stack:
         workdir = Path(tempfile.mkdtemp(prefix="bench-reload-"))
-        stack.callback(shutil.rmtree, workdir, ignore_errors=True)
+        outcome: dict[str, Any] = {}
+        stack.callback(_tidy, workdir, outcome)
         broker = stack.enter_context(running_broker())
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}",
                                        f"Macro/{CLOCK_MACRO}", track_seq=True)
@@ -49,8 +50,17 @@ def run_reload(machines: int, period_s: float, watch_s: float) -> dict[str, Any]
         stack.callback(daemon.stop, timeout=30)
         born_s = wait_for_births(subscriber, daemon, machines, started, workdir)
         time.sleep(SETTLE_S)
-        return {"machines": machines, "period_s": period_s, "all_born_s": born_s,
-                **_reload(subscriber, daemon, config, broker, workdir, ports, period_s, watch_s)}
+        outcome.update({"machines": machines, "period_s": period_s, "all_born_s": born_s,
+                        **_reload(subscriber, daemon, config, broker, workdir, ports, period_s, watch_s)})
+        return outcome
+
+
+def _tidy(workdir: Path, outcome: dict[str, Any]) -> None:
+    """The work dir (daemon log, config) is kept when the run failed or disturbed a machine."""
+    if outcome and not any(outcome[k] for k in ("other_dbirths", "ddeaths", "seq_gaps", "silent_machines")):
+        shutil.rmtree(workdir, ignore_errors=True)
+    else:
+        print(f"  reload: logs kept in {workdir}", flush=True)
 
 
 def _reload(subscriber: LatencySubscriber, daemon: DaemonProcess, config: Path, broker: Mosquitto, workdir: Path,
@@ -63,7 +73,7 @@ def _reload(subscriber: LatencySubscriber, daemon: DaemonProcess, config: Path, 
     config.write_text(config_text(broker, workdir / "state", ports, period_s))
     sent = time.time()
     daemon.proc.send_signal(signal.SIGHUP)
-    wait_until(lambda: added in subscriber.birth_times, 60, f"the DBIRTH of {added}")
+    wait_until(lambda: added in subscriber.birth_times, 120, f"the DBIRTH of {added}")
     added_born_s = subscriber.birth_times[added] - sent
     data_before = dict(subscriber.ddata)
     time.sleep(watch_s)
