@@ -10,7 +10,10 @@ What this adds to paho:
 - clean session (3.1.1) / clean start with session expiry 0 (5) on every attempt: paho's MQTT 5 default,
   clean start on the first connect only, would break Sparkplug on reconnect;
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
-  lock-step after a broker restart;
+  lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off);
+- `on_lost(lasted_s, reason)` for a session the broker ended and we did not, told at the next CONNACK and
+  only when that came at the first attempt: a broker that ends a session and takes the client straight back
+  is what a taken-over client id looks like, a broker restart or a network loss is not (edge.publish.identity);
 - keepalive (PINGREQ, and a dead-broker verdict when no PINGRESP comes) from a once-a-second loop timer;
 - awaitable SUBACK / PUBACK;
 - QoS 0 messages without properties (all Sparkplug DATA) are encoded here (edge.publish.mqtt_wire) and
@@ -39,6 +42,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
+from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -83,13 +87,21 @@ class MqttConnection:
                  before_connect: Callable[[bool], Will | None],
                  on_connected: Callable[[object], None],
                  on_disconnected: Callable[[], None],
-                 on_message: Callable[[InboundMessage], None]) -> None:
+                 on_message: Callable[[InboundMessage], None],
+                 on_lost: Callable[[float, str], None] | None = None,
+                 min_delay: Callable[[], float] | None = None) -> None:
         self._settings = settings
         self._client_id = client_id
         self._before_connect = before_connect
         self._on_connected = on_connected
         self._on_disconnected = on_disconnected
         self._on_message = on_message
+        self._on_lost = on_lost
+        self._min_delay = min_delay
+        self._connected_at = 0.0  # loop time of the last CONNACK
+        self._dropping = False  # drop_socket() asked for this loss: not the broker's doing
+        self._lost: tuple[float, str] | None = None  # (lasted_s, reason) of a session the broker ended
+        self._back_at_once = False  # the last CONNACK came at the first attempt after a lost session
         self._v5 = settings.protocol == "5"
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread = 0
@@ -114,6 +126,7 @@ class MqttConnection:
                         "paho_mqtt=%s problem=%s", mqtt_wire.PAHO_VERSION, mqtt_wire.PROBLEM)
         self.connected = False  # CONNACK accepted and not lost since
         self.connects = 0
+        self.trouble = BrokerTrouble(settings.host, settings.port, client_id, log)  # outages, summarised
 
     # -- lifecycle -----------------------------------------------------------------------------------
 
@@ -183,6 +196,7 @@ class MqttConnection:
         client = self._client
         sock = client.socket() if client is not None else None
         if isinstance(sock, socket.socket):
+            self._dropping = True
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
 
@@ -200,6 +214,10 @@ class MqttConnection:
             delay = self._delay()
             self._attempt += 1
             await asyncio.sleep(delay)
+            # A conflict may have been found meanwhile (the other connection's loss): ask for the floor now.
+            floor = self._min_delay() if self._min_delay is not None else 0.0
+            if floor > delay:
+                await asyncio.sleep(floor - delay)
 
     async def _attempt_connect(self, loop: asyncio.AbstractEventLoop, client: paho.Client) -> bool:
         """One attempt: the blocking TCP/TLS connect and the CONNECT packet in a worker thread, then the
@@ -214,10 +232,8 @@ class MqttConnection:
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            # A broker that is down is an outage (INFO); a TLS failure is a configuration to fix (WARNING).
             tls = connect_failure.is_tls_failure(exc)
-            self._log_attempt_failed(logging.WARNING if tls else logging.INFO,
-                                     "TLS handshake failed" if tls else "connect failed", str(exc))
+            self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
         finally:
             self._connecting = False
@@ -229,11 +245,10 @@ class MqttConnection:
         self._watch(loop, client, sock)
         return True
 
-    def _log_attempt_failed(self, level: int, what: str, cause: str) -> None:
+    def _attempt_failed(self, what: str, cause: BaseException | str, reason: str | None = None) -> None:
+        """WARNING when an outage starts or its reason changes, then summarised (edge.publish.broker_trouble)."""
         self._attempt_reported = True
-        extra = connect_failure.hint(cause, self._settings)
-        log.log(level, "MQTT %s host=%s port=%s client_id=%s attempt=%d error=%s%s", what, self._settings.host,
-                self._settings.port, self._client_id, self._attempt + 1, cause, f" hint={extra}" if extra else "")
+        self.trouble.failed(what, cause, connect_failure.hint(str(cause), self._settings), reason)
 
     def _watch(self, loop: asyncio.AbstractEventLoop, client: paho.Client, sock: Any) -> None:
         # paho leaves Nagle on: a reply or DATA sent while an earlier packet is unacknowledged would wait
@@ -414,11 +429,11 @@ class MqttConnection:
     def _paho_connect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                       properties: Properties | None) -> None:
         if reason.is_failure:
-            self._attempt_reported = True
-            log.warning("MQTT connection refused host=%s port=%s client_id=%s reason=%s",
-                        self._settings.host, self._settings.port, self._client_id, reason)
+            self._attempt_failed("connection refused", str(reason),
+                                 NOT_AUTHORISED if reason.value in (0x04, 0x05, 0x86, 0x87, 0x8C) else None)
             return  # paho closes the socket; the supervisor retries after the backoff delay
         client.on_log = None  # formatting every paho log line costs on the publish path
+        self._back_at_once = self._attempt == 1
         self._attempt = 0
         # QoS 1 messages of the previous connection would be re-sent by paho now, before our births and
         # with a stale Sparkplug seq; the publisher's spool re-sends their samples instead.
@@ -472,26 +487,39 @@ class MqttConnection:
             return
         self.connected = True
         self.connects += 1
+        self._dropping = False
+        if self._loop is not None:
+            self._connected_at = self._loop.time()
+        lost, self._lost = self._lost, None
+        if lost is not None and self._back_at_once and self._on_lost is not None:
+            self._on_lost(*lost)
         log.info("MQTT connected host=%s port=%s client_id=%s protocol=%s", self._settings.host,
                  self._settings.port, self._client_id, self._settings.protocol)
+        recovered = self.trouble.up()
+        if recovered:
+            log.info("%s", recovered)
         self._on_connected(tag)
 
     def _loop_disconnected(self, reason: str) -> None:
         if not self.connected and not self._attempt_reported and self._client is not None:
             # Closed between CONNECT and CONNACK: a broker refusing at the TLS layer (no client
             # certificate) looks like this; say why, as a refused password is said.
-            self._log_attempt_failed(logging.WARNING, "connection closed before CONNACK",
-                                     self._attempt_error or reason)
+            self._attempt_failed("connection closed before CONNACK", self._attempt_error or reason)
         if self.connected:
             stopping = self._client is None  # stop() clears it first: a disconnect we asked for
+            if not stopping:
+                self.trouble.lost(reason)
             log.log(logging.INFO if stopping else logging.WARNING,
                     "MQTT %s host=%s port=%s client_id=%s reason=%s", "disconnected" if stopping else "connection lost",
                     self._settings.host, self._settings.port, self._client_id, reason)
+            if not stopping and not self._dropping and self._loop is not None:
+                self._lost = (self._loop.time() - self._connected_at, reason)
         self._set_disconnected()
 
     def _set_disconnected(self) -> None:
         was = self.connected
         self.connected = False
+        self.trouble.down()
         for fut in self._pending.values():
             if not fut.done():
                 fut.set_exception(MqttUnavailable("connection lost"))

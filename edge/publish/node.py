@@ -120,7 +120,7 @@ class SparkplugNode:
         self.ncmd_topic = f"{base}/NCMD/{edge_node_id}"
         self.dcmd_topic_filter = f"{base}/DCMD/{edge_node_id}/+"
         self.ndeath_topic = f"{base}/NDEATH/{edge_node_id}"
-        self._nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
+        self.nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
         self._ndata_topic = f"{base}/NDATA/{edge_node_id}"
         self._device_topic = f"{base}/{{kind}}/{edge_node_id}/{{device}}"
 
@@ -166,7 +166,7 @@ class SparkplugNode:
         p.metrics.add(name=pl.BDSEQ_METRIC, datatype=DataType.Int64, timestamp=ts, long_value=self._bdseq)
         p.metrics.add(name=pl.REBIRTH_METRIC, datatype=DataType.Boolean, timestamp=ts, boolean_value=False)
         self._add_birth_metrics(p, self._node, ts)
-        out = [Outgoing(self._nbirth_topic, p.SerializeToString())]
+        out = [Outgoing(self.nbirth_topic, p.SerializeToString())]
         self.born = True
         self.holding = False
         for device_id, dev in self._devices.items():
@@ -465,6 +465,9 @@ class SparkplugNode:
         if parts[2] == "NCMD" and len(parts) == 4:
             return [self._node_command(m) for m in p.metrics]
         if parts[2] == "DCMD" and len(parts) == 5:
+            if not p.metrics:  # still a command someone sent: refused and audited, not dropped unseen
+                return [CommandIgnored(f"{topic}: a DCMD without metrics", unknown=False, device_id=parts[4],
+                                       code="malformed")]
             return [self._device_command(parts[4], m) for m in p.metrics]
         expected = "expected NCMD/<edge> or DCMD/<edge>/<device>"
         return [CommandIgnored(f"topic {topic!r}: {expected}", unknown=True)]

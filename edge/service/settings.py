@@ -16,6 +16,7 @@ from edge.collect import (
 )
 from edge.command import AllowRule, CommandSettings, RateLimit, WritePolicy
 from edge.config import AlarmsConfig, Config, MachineConfig, PollPlan
+from edge.config.mqtt import gateway_name
 from edge.opcua.settings import OpcUaSettings
 from edge.publish.settings import PublishSettings
 
@@ -38,13 +39,15 @@ def publish_settings(config: Config) -> PublishSettings:
         protocol=mqtt.protocol,
         keepalive=mqtt.keepalive,
         formats=frozenset(mqtt.formats),
-        json_prefix=mqtt.json_topics.prefix,
+        json_prefix=mqtt.json_prefix,
         state_dir=config.resolved_state_dir,
     )
     if mqtt.client_id:
         settings.client_id = mqtt.client_id
     elif spb is not None:
         settings.client_id = f"focas-edge-{spb.group_id}-{spb.edge_node_id}"
+    else:  # JSON only: two gateways must not share a client id (the broker would take turns kicking them)
+        settings.client_id = f"focas-edge-{gateway_name()}"
     if spb is not None:
         settings.group_id = spb.group_id
         settings.edge_node_id = spb.edge_node_id
@@ -128,8 +131,10 @@ def command_settings(config: Config) -> CommandSettings:
         for device in devices:
             machines[device.id] = _machine_settings(config, device, ids)
             policies[device.id] = write_policy(config, device)
+    audit = config.writes.audit
     return CommandSettings(state_dir=config.resolved_state_dir, max_payload_bytes=config.writes.max_payload_bytes,
-                           machines=machines, policies=policies)
+                           machines=machines, policies=policies, audit_max_bytes=int(audit.max_bytes),
+                           audit_keep=audit.keep)
 
 
 def write_policy(config: Config, machine: MachineConfig) -> WritePolicy:
