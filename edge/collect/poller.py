@@ -378,7 +378,7 @@ class MachinePoller:
         """One extractor per read of the plan, shared by every combination of groups it appears in."""
         found = self._extractors.get(id(read))
         if found is None:
-            found = self._extractors[id(read)] = pl.value_extractor(read)
+            found = self._extractors[id(read)] = pl.shared_value_extractor(read)
         return found
 
     async def _tick(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickResult:
