@@ -31,6 +31,7 @@ from edge.service.sdnotify import SystemdNotifier
 from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
 from edge.service.state_lock import StateDirLock
 from edge.service.status_http import StatusServer
+from edge.service.trends import TrendRecorder
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +60,8 @@ class Daemon:
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
-        self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
+        self.trends = TrendRecorder()  # what the status endpoint's plant page draws
+        self.outputs = Outputs(self.publisher, [self.trends] + ([self.opcua] if self.opcua is not None else []))
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.on_device_command_refused = self.commands.on_device_command_refused
@@ -189,8 +191,8 @@ class Daemon:
         except Exception as exc:
             log.error("OPC UA server not started, running without it endpoint=%s error=%r",
                       self.opcua.settings.endpoint, exc)
+            self.outputs.others.remove(self.opcua)
             self.opcua = None
-            self.outputs.others.clear()
 
     def _install_signals(self) -> None:
         loop = asyncio.get_running_loop()
@@ -257,6 +259,8 @@ class Daemon:
         self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
+        for machine_id in removed:
+            self.trends.forget(machine_id)
         for machine_id in changed + added:
             self._start_machine(fresh[machine_id])
         log.info("reloaded added=%s removed=%s changed=%s", added, removed, changed)
