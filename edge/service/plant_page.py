@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime, tzinfo
 from typing import Any
-from urllib.parse import quote, unquote
+from urllib.parse import parse_qs, quote, unquote
 
 from edge.service.svg import duration_text, sparkline_svg, timeline_svg
 from edge.service.trends import (
@@ -33,6 +33,7 @@ from edge.service.trends import (
 FLEET_REFRESH_MS = 5000
 TROUBLE_CLASS = ' class="trouble"'
 MACHINE_REFRESH_S = 10
+RECENT_MINUTES = 60  # the recent timeline: the last hour, or fewer minutes (?minutes=N) to zoom in
 DAY_S = 24 * HOUR_S
 EXECUTION_RUNNING = "ACTIVE"  # the Utilisation/<STATE> that counts as running
 
@@ -49,7 +50,7 @@ STYLE = """
 svg.timeline{display:block;margin:.2em 0 .8em;background:#fff;border:1px solid #ddd}
 svg.timeline text{font:10px system-ui,sans-serif;fill:#555}svg.timeline line.tick{stroke:#888}
 svg.spark{background:#fff;border:1px solid #ddd}svg.spark polyline{fill:none;stroke:#1565c0;stroke-width:1.5}
-svg.spark circle{fill:#1565c0}.legend span{margin-right:1em}.sparks{display:flex;gap:2em;flex-wrap:wrap}
+svg.spark circle{fill:#1565c0}.legend>span{margin-right:1em}.sparks{display:flex;gap:2em;flex-wrap:wrap}
 """
 
 
@@ -147,6 +148,7 @@ setInterval(async () => {{
 
 def fleet_block(pollers: Mapping[str, Any], trends: TrendRecorder, now: float | None = None) -> str:
     """What `/` shows on top: the styles, the fleet section and its refresh script."""
+    now = trends.clock() if now is None else now
     return f"<style>{STYLE}</style>{render_fleet(pollers, trends, now)}{FLEET_SCRIPT}"
 
 
@@ -163,12 +165,22 @@ def _ticks(start: float, end: float, every_s: float, zone: tzinfo) -> list[tuple
     offset = datetime.fromtimestamp(start, zone).utcoffset()
     shift = offset.total_seconds() if offset is not None else 0.0
     first = ((start + shift) // every_s + 1) * every_s - shift
-    label = _clock(zone, with_seconds=False)
+    label = _clock(zone, with_seconds=every_s < 60)
     ticks, at = [], first
     while at < end:
         ticks.append((at, label(at)))
         at += every_s
     return ticks
+
+
+def _tick_step(span_s: float) -> float:
+    """About six ticks on round local times."""
+    return next((step for step in (10, 30, 60, 120, 300, 600) if span_s / step <= 7), 600)
+
+
+def _recent_title(minutes: int) -> str:
+    return "Last hour" if minutes == 60 else f"Last {minutes} minute{'s' if minutes > 1 else ''}" \
+        " (<a href=\"?minutes=60\">last hour</a>)"
 
 
 def _legend() -> str:
@@ -198,9 +210,11 @@ def _alarms(trend: MachineTrend, midnight: float, zone: tzinfo) -> str:
             f"</tr></thead><tbody>{rows}</tbody></table>")
 
 
-def render_machine(machine_id: str, poller: Any, trend: MachineTrend | None, now: float | None = None) -> str:
-    """The whole page of one machine (it reloads itself)."""
+def render_machine(machine_id: str, poller: Any, trend: MachineTrend | None, now: float | None = None,
+                   recent_minutes: int = RECENT_MINUTES) -> str:
+    """The whole page of one machine (it reloads itself); the recent timeline spans `recent_minutes`."""
     now = time.time() if now is None else now
+    recent_s = recent_minutes * 60.0
     zone = zone_of(poller)
     band = current_band(poller, trend)
     e = html.escape
@@ -211,12 +225,12 @@ def render_machine(machine_id: str, poller: Any, trend: MachineTrend | None, now
         since = band_since(poller, trend, band, now)
         day = timeline_svg("timeline-day", trend.day.bands(now - DAY_S, now), now - DAY_S, now,
                            _ticks(now - DAY_S, now, 3 * HOUR_S, zone), _clock(zone, with_seconds=False))
-        hour = timeline_svg("timeline-hour", trend.hour.bands(now - HOUR_S, now), now - HOUR_S, now,
-                            _ticks(now - HOUR_S, now, 600, zone), _clock(zone))
+        hour = timeline_svg("timeline-hour", trend.hour.bands(now - recent_s, now), now - recent_s, now,
+                            _ticks(now - recent_s, now, _tick_step(recent_s), zone), _clock(zone))
         content = (f'<p><span class="dot {band.css}"></span> <strong id="state">{band.label}</strong> for '
                    f"{duration_text(now - since)} · running today: "
                    f'<strong id="utilisation">{_share_text(running_share(trend, now, zone))}</strong></p>'
-                   f"{_legend()}<h2>Last 24 hours</h2>{day}<h2>Last hour</h2>{hour}"
+                   f"{_legend()}<h2>Last 24 hours</h2>{day}<h2>{_recent_title(recent_minutes)}</h2>{hour}"
                    f"<h2>Spindle load and feed rate, last hour</h2>{_sparks(trend, now)}"
                    f"<h2>Alarms today</h2>{_alarms(trend, midnight, zone)}")
     generated = datetime.fromtimestamp(now, zone).isoformat(timespec="seconds")
@@ -237,14 +251,21 @@ table{{border-collapse:collapse;background:#fff}}th,td{{border:1px solid #ddd;pa
 """
 
 
-def machine_response(route: str, pollers: Mapping[str, Any], trends: TrendRecorder) -> tuple[int, str]:
-    """(HTTP status, HTML) for /fleet and /machine/<id>; an unknown machine is a 404 naming the known ones."""
+def machine_response(path: str, pollers: Mapping[str, Any], trends: TrendRecorder) -> tuple[int, str]:
+    """(HTTP status, HTML) for /fleet and /machine/<id>[?minutes=N]; an unknown machine is a 404 naming the
+    known ones, a bad `minutes` a 400 saying what is allowed."""
+    route, _, query = path.partition("?")
+    now = trends.clock()  # the recorder's clock: the bands' and the page's times agree
     if route == "/fleet":
-        return 200, render_fleet(pollers, trends)
+        return 200, render_fleet(pollers, trends, now)
     machine_id = unquote(route.removeprefix("/machine/"))
     poller = pollers.get(machine_id)
     if poller is None:
         known = ", ".join(sorted(pollers)[:20]) or "none"
         return 404, (f"<!doctype html><title>no such machine</title><p>no machine {html.escape(machine_id)!r}; "
                      f"known: {html.escape(known)}{' ...' if len(pollers) > 20 else ''}</p>")
-    return 200, render_machine(machine_id, poller, trends.machine(machine_id))
+    minutes = parse_qs(query).get("minutes", [str(RECENT_MINUTES)])[-1]
+    if not minutes.isdigit() or not 1 <= int(minutes) <= RECENT_MINUTES:
+        return 400, (f"<!doctype html><title>bad request</title><p>minutes={html.escape(minutes)!r}: expected a "
+                     f"whole number of minutes from 1 to {RECENT_MINUTES} (the recent timeline's width)</p>")
+    return 200, render_machine(machine_id, poller, trends.machine(machine_id), now, int(minutes))

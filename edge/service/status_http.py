@@ -238,7 +238,7 @@ class StatusServer:
                 return Response(200, "text/html; charset=utf-8", render_page(doc, top).encode())
             return Response(200, "application/json", page_json(doc))
         if trends is not None and (route == "/fleet" or route.startswith("/machine/")):
-            status, body = machine_response(route, self.daemon.pollers, trends)
+            status, body = machine_response(path, self.daemon.pollers, trends)
             return Response(status, "text/html; charset=utf-8", body.encode())
         return _json(404, {"error": f"no such path {route!r}; expected /, /status.json, /healthz, /metrics, "
                                     "/fleet or /machine/<id>"})

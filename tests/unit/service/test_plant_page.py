@@ -134,3 +134,20 @@ def test_timeline_clips_to_its_window_and_a_sparkline_breaks_at_gaps() -> None:
     assert (low, high) == (0.0, 4.0) and line.count("<polyline") == 2 and line.count("<circle") == 1
     assert sparkline_svg("sp", [None, None])[1:] == (None, None)
     assert (duration_text(12), duration_text(270), duration_text(3900)) == ("12 s", "4 min 30 s", "1 h 05 min")
+
+
+async def test_the_recent_timeline_zooms_to_a_few_minutes_and_a_bad_width_is_refused() -> None:
+    clock = Clock(NOON - 90)
+    rec = TrendRecorder(clock)
+    await feed(rec, clock, "m1", (NOON - 90, [s("Status/Run", "START")]), (NOON - 30, [s("Status/Run", "HOLD")]))
+    pollers = {"m1": poller()}
+    clock.now = NOON
+    status, page = machine_response("/machine/m1?minutes=2", pollers, rec)
+    hour = re.search(r'<svg id="timeline-hour".*?</svg>', page, re.S)
+    assert status == 200 and hour is not None and "Last 2 minutes" in page
+    widths = [round(float(w)) for w in re.findall(r'class="band [a-z-]+" x="[\d.]+" y="0" width="([\d.]+)"',
+                                                   hour.group(0))]
+    assert widths == [250, 500, 250]  # 30 s unknown, 60 s running, 30 s held, of 120 s
+    for bad in ("0", "61", "x", "-5"):
+        status, page = machine_response(f"/machine/m1?minutes={bad}", pollers, rec)
+        assert status == 400 and "expected a whole number of minutes from 1 to 60" in page
