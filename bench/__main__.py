@@ -1,6 +1,6 @@
 """`python -m bench [name ...] [--quick] [--repeat N]`: run benchmarks, print tables, save JSON.
 
-Names: codec, roundtrip, fleet, floor, writes, opcua (default: all but opcua, in that order). Results go to
+Names: codec, roundtrip, fleet, floor, writes, plantpage, opcua (default: all but opcua, in that order). Results go to
 bench/results/.
 """
 
@@ -12,10 +12,10 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from bench import codec, fleet, floor, opcua, roundtrip, writes
+from bench import codec, fleet, floor, opcua, plant_page, roundtrip, writes
 from bench.report import Result, machine_info, render, save
 
-BENCHMARKS = ("codec", "roundtrip", "fleet", "floor", "writes", "opcua")
+BENCHMARKS = ("codec", "roundtrip", "fleet", "floor", "writes", "plantpage", "opcua")
 DEFAULT = BENCHMARKS[:-1]  # opcua needs the [opcua] extra and takes minutes: asked for by name
 
 
@@ -35,6 +35,7 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         "fleet": run_fleet,
         "floor": lambda: floor.run(quick=args.quick, duration_s=args.duration, repeats=args.repeat),
         "writes": lambda: writes.run(quick=args.quick),
+        "plantpage": lambda: plant_page.run(quick=args.quick),
         "opcua": lambda: opcua.run(quick=args.quick, machines=sizes[0] if sizes else None, duration_s=args.duration,
                                    repeats=args.repeat),
     }

@@ -31,7 +31,7 @@ from edge.service.sdnotify import SystemdNotifier
 from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
 from edge.service.state_lock import StateDirLock
 from edge.service.status_http import StatusServer
-from edge.service.trends import TrendRecorder
+from edge.service.trend_store import close_trends, keep_saved, open_trends
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,7 @@ class Daemon:
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
-        self.trends = TrendRecorder()  # what the status endpoint's plant page draws
+        self.trends = open_trends(self.state_dir, (m.id for m in config.devices()))  # what the plant page draws
         self.outputs = Outputs(self.publisher, [self.trends] + ([self.opcua] if self.opcua is not None else []))
         self.publisher.on_device_command = self.commands.on_device_command
         self.publisher.on_json_command = self.commands.on_json_command
@@ -116,7 +116,8 @@ class Daemon:
             self._start_machine(machine)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
-        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
+        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics"),
+                      asyncio.create_task(keep_saved(self.trends, self.state_dir), name="plant-timelines")]
         interval = self.notifier.watchdog_interval()
         if interval:
             background.append(asyncio.create_task(self._watchdog_loop(interval), name="watchdog"))
@@ -156,6 +157,7 @@ class Daemon:
         if self.status_http is not None:
             await self.status_http.stop()
             self.status_http = None
+        close_trends(self.trends, self.state_dir)
         self.lock.release()  # last: nothing of this daemon touches state_dir any more
         log.info("stopped")
 

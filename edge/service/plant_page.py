@@ -46,7 +46,8 @@ STYLE = """
 .band.offline,.dot.offline{fill:#616161;background:#616161}
 .band.unknown,.dot.unknown{fill:#d9d9d9;background:#d9d9d9}
 .dot{display:inline-block;width:1em;height:1em;border-radius:50%;vertical-align:middle}
-#fleet table{margin-bottom:1.2em}#fleet tr.trouble td{background:#fff3f3}
+#fleet table{margin-bottom:1.2em;width:auto;min-width:40em}#fleet h2{font-size:1.1em}
+#fleet tr.trouble td{background:#fff3f3}
 svg.timeline{display:block;margin:.2em 0 .8em;background:#fff;border:1px solid #ddd}
 svg.timeline text{font:10px system-ui,sans-serif;fill:#555}svg.timeline line.tick{stroke:#888}
 svg.spark{background:#fff;border:1px solid #ddd}svg.spark polyline{fill:none;stroke:#1565c0;stroke-width:1.5}

@@ -28,6 +28,11 @@ class Clock:
         return self.now
 
 
+def relative(runs: list[tuple[float, float, Band]]) -> list[tuple[float, float, Band]]:
+    """Bands with their times relative to T0, to compare with a literal."""
+    return [(a - T0, b - T0, band) for a, b, band in runs]
+
+
 def s(name: str, value: object, kind: MetricType = MetricType.STRING) -> Sample:
     return Sample(name, value, kind, 0)
 
@@ -67,7 +72,7 @@ async def test_bands_follow_the_samples_and_an_offline() -> None:
     trend = rec.machine("m1")
     assert trend is not None and trend.band is Band.OFFLINE and trend.since == T0 + 90
     runs = trend.hour.bands(T0 - 60, clock.now)
-    assert [(a - T0, b - T0, band) for a, b, band in runs] == [
+    assert relative(runs) == [
         (-60, 0, Band.UNKNOWN), (0, 40, Band.RUNNING), (40, 60, Band.FEED_HOLD), (60, 90, Band.ALARM),
         (90, 100, Band.OFFLINE)]
     await rec.device_online("m1", [], [s("Status/Run", "RESET"), s("Status/Alarm", "")])
@@ -96,7 +101,7 @@ async def test_the_day_strip_keeps_the_dominant_band_of_each_minute_and_unknown_
     trend = rec.machine("m1")
     assert trend is not None
     runs = trend.day.bands(T0 - 120, clock.now)
-    assert [(a - T0, b - T0, band) for a, b, band in runs] == [
+    assert relative(runs) == [
         (-120, 0, Band.UNKNOWN), (0, 60, Band.RUNNING), (60, 180, Band.IDLE), (180, 200, Band.FEED_HOLD)]
     assert trend.day.seconds_in(Band.IDLE, T0, clock.now) == 120
 
