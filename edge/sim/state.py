@@ -65,7 +65,6 @@ from edge.sim.state_program import (
     MOTION_DWELL,
     MOTION_MOVING,
     MOTION_NONE,
-    RUN_HOLD,
     RUN_RESET,
     RUN_START,
     CycleSpec,
@@ -113,7 +112,6 @@ class MachineState:
         # so a subscriber can compare a published source timestamp with the clock it claims to be.
         self.clock_macro: int | None = None
         self.emergency = False
-        self.feed_hold = False  # the operator's FEED HOLD button: cutting stops, the program stays where it is
         self.mode = AUT_MEM
         self._alarms.seed_history(self._t0, self.seed)
         self._processed = self._phase
@@ -244,8 +242,6 @@ class MachineState:
                 return StatInfo(self.mode, RUN_RESET, MOTION_NONE, 0, 1, alarm, 0)
             if not cutting:
                 return StatInfo(self.mode, RUN_RESET, MOTION_NONE, 0, 0, alarm, 0)
-            if self.feed_hold:
-                return StatInfo(self.mode, RUN_HOLD, MOTION_NONE, 0, 0, alarm, 0)
             tool_change = into < 1.0  # M06 waiting for FIN at the start of the program
             dwell = 0.55 < into / self._cycle.cut_seconds < 0.6
             motion = MOTION_NONE if tool_change else MOTION_DWELL if dwell else MOTION_MOVING
@@ -255,11 +251,6 @@ class MachineState:
         with self._lock:
             self.emergency = on
             self._refresh_signals(self._processed)
-
-    def set_feed_hold(self, on: bool) -> None:
-        """Feed hold (statinfo run HOLD, feed 0) while a part is being cut; between parts it changes nothing."""
-        with self._lock:
-            self.feed_hold = on
 
     def set_param_write_enable(self, on: bool) -> None:
         """The PWE switch (setting screen): parameter writes answer EW_PASSWD while it is off."""
@@ -320,7 +311,7 @@ class MachineState:
     def actual_feed(self) -> float:
         """Actual feed (mm/min): 0 between parts."""
         with self._lock:
-            return self._motion.actual_feed(self._cycle_time(), self.emergency or self.feed_hold)
+            return self._motion.actual_feed(self._cycle_time(), self.emergency)
 
     def spindle_speed(self) -> float:
         """Actual spindle speed (min-1)."""

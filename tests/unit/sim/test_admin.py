@@ -29,12 +29,3 @@ def test_admin_routes_in_process() -> None:
     assert missing.value.status == 404
     with pytest.raises(ValueError):
         admin.handle("POST", "/machines/0/state", {"colour": "red"})
-
-
-def test_admin_feed_hold_on_and_off() -> None:
-    fleet = Fleet([MachineSpec(profile="30i")], base_port=0)
-    admin = AdminServer(fleet)
-    admin.handle("POST", "/machines/0/state", {"feed_hold": True})
-    assert fleet[0].state.feed_hold
-    admin.handle("POST", "/machines/0/state", {"feed_hold": False})
-    assert not fleet[0].state.feed_hold

@@ -53,14 +53,3 @@ def test_different_seeds_do_not_run_in_step() -> None:
     clock_a.tick(2.0)
     clock_b.tick(2.0)
     assert a.positions() != b.positions()
-
-
-def test_feed_hold_stops_the_feed_of_a_part_being_cut_and_releases_it() -> None:
-    state, clock = machine()
-    clock.tick(3.0)  # cutting
-    state.set_feed_hold(True)
-    held = state.status()
-    assert (held.run, held.motion) == (2, 0)  # HOLD, no motion
-    assert state.actual_feed() == 0.0 and state.spindle_speed() > 0
-    state.set_feed_hold(False)
-    assert state.status().run == 3 and state.actual_feed() > 0
