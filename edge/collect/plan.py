@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from edge.collect.clock import SYNC_TARGET_S
+from edge.collect.execution import CONTROLLER_MODE, EXECUTION, derive
 from edge.collect.settings import PollSettings
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
@@ -77,6 +78,8 @@ STATUS_METRICS: tuple[tuple[MetricSpec, Callable[[StatInfo], object]], ...] = (
     (MetricSpec("Status/Edit", MetricType.INT16), lambda s: s.edit),
     (MetricSpec("Status/MSTB", MetricType.BOOLEAN, description="M/S/T/B function finishing"),
      lambda s: s.mstb == 1),
+    (EXECUTION, lambda s: derive(s).execution),  # the MES vocabulary, edge.collect.execution
+    (CONTROLLER_MODE, lambda s: derive(s).controller_mode),
 )
 
 SYSINFO_METRICS: tuple[tuple[MetricSpec, Callable[[SysInfo], object]], ...] = (
