@@ -69,7 +69,8 @@ STATE_INPUTS = frozenset((EXECUTION, AVAILABILITY, RUN, ALARM, EMERGENCY))
 
 EXECUTION_BANDS = {"ACTIVE": Band.RUNNING, "FEED_HOLD": Band.FEED_HOLD, "INTERRUPTED": Band.FEED_HOLD,
                    "READY": Band.IDLE, "STOPPED": Band.IDLE, "PROGRAM_STOPPED": Band.IDLE,
-                   "PROGRAM_COMPLETED": Band.IDLE, "WAIT": Band.IDLE, "OPTIONAL_STOP": Band.IDLE}
+                   "PROGRAM_COMPLETED": Band.IDLE, "WAIT": Band.IDLE, "OPTIONAL_STOP": Band.IDLE,
+                   "UNAVAILABLE": Band.UNKNOWN}  # a run code the derivation does not know
 RUN_BANDS = {"START": Band.RUNNING, "MSTR": Band.RUNNING, "HOLD": Band.FEED_HOLD, "STOP": Band.IDLE,
              "RESET": Band.IDLE}
 # Status/Alarm texts that are warnings (battery, fan): the machine still runs.
@@ -95,7 +96,7 @@ def band_of(inputs: Mapping[str, object]) -> Band:
         return Band.ALARM
     execution = inputs.get(EXECUTION)
     if isinstance(execution, str):
-        return EXECUTION_BANDS.get(execution, Band.IDLE)
+        return EXECUTION_BANDS.get(execution, Band.UNKNOWN)
     run = inputs.get(RUN)
     return RUN_BANDS.get(run, Band.UNKNOWN) if isinstance(run, str) else Band.UNKNOWN
 

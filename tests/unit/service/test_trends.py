@@ -43,6 +43,7 @@ def s(name: str, value: object, kind: MetricType = MetricType.STRING) -> Sample:
     ({"Status/Execution": "INTERRUPTED"}, Band.FEED_HOLD),
     ({"Status/Execution": "READY"}, Band.IDLE),
     ({"Status/Execution": "PROGRAM_STOPPED"}, Band.IDLE),
+    ({"Status/Execution": "UNAVAILABLE", "Status/Run": "START"}, Band.UNKNOWN),  # a run code nobody knows
     ({"Status/Execution": "ACTIVE", "Status/Run": "RESET"}, Band.RUNNING),  # the derived state wins
     ({"Status/Run": "START"}, Band.RUNNING),
     ({"Status/Run": "HOLD"}, Band.FEED_HOLD),
