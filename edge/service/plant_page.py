@@ -23,6 +23,7 @@ from edge.service.svg import duration_text, sparkline_svg, timeline_svg
 from edge.service.trends import (
     HOUR_S,
     SPARK_SERIES,
+    SPARK_STEP_S,
     TROUBLE,
     TROUBLE_RANK,
     Band,
@@ -114,7 +115,11 @@ def fleet_rows(pollers: Mapping[str, Any], trends: TrendRecorder, now: float) ->
 
 
 def _share_text(share: float | None) -> str:
-    return "-" if share is None else f"{share * 100:.0f} %"
+    """Whole percent; a tenth below 10 % (early in the day 0.3 % is not 0 %)."""
+    if share is None:
+        return "-"
+    percent = share * 100
+    return f"{percent:.1f} %" if percent < 10 else f"{percent:.0f} %"
 
 
 def render_fleet(pollers: Mapping[str, Any], trends: TrendRecorder, now: float | None = None) -> str:
@@ -180,8 +185,7 @@ def _tick_step(span_s: float) -> float:
 
 
 def _recent_title(minutes: int) -> str:
-    return "Last hour" if minutes == 60 else f"Last {minutes} minute{'s' if minutes > 1 else ''}" \
-        " (<a href=\"?minutes=60\">last hour</a>)"
+    return "Last hour" if minutes == 60 else f"Last {minutes} minute{'s' if minutes > 1 else ''}"
 
 
 def _legend() -> str:
@@ -189,11 +193,13 @@ def _legend() -> str:
                                           for band in TROUBLE) + "</p>"
 
 
-def _sparks(trend: MachineTrend, now: float) -> str:
+def _sparks(trend: MachineTrend, now: float, minutes: int) -> str:
+    """The sparklines over the same span as the recent timeline (the last hour, or the zoom)."""
     cells = []
     for name, label in SPARK_SERIES.items():
-        svg, low, high = sparkline_svg(f"spark-{name.replace('/', '-')}", trend.sparks[name].points(now))
-        scale = "no value in the last hour" if high is None else f"{low:g} .. {high:g}"
+        points = trend.sparks[name].points(now)[-max(1, round(minutes * 60 / SPARK_STEP_S)):]
+        svg, low, high = sparkline_svg(f"spark-{name.replace('/', '-')}", points)
+        scale = "no value in this span" if high is None else f"{low:g} .. {high:g}"
         cells.append(f"<div><strong>{html.escape(label)}</strong> <small>({html.escape(name)}, peak per 30 s; "
                      f"{scale})</small><br>{svg}</div>")
     return '<div class="sparks">' + "".join(cells) + "</div>"
@@ -228,11 +234,13 @@ def render_machine(machine_id: str, poller: Any, trend: MachineTrend | None, now
                            _ticks(now - DAY_S, now, 3 * HOUR_S, zone), _clock(zone, with_seconds=False))
         hour = timeline_svg("timeline-hour", trend.hour.bands(now - recent_s, now), now - recent_s, now,
                             _ticks(now - recent_s, now, _tick_step(recent_s), zone), _clock(zone))
+        zoom = "" if recent_minutes == RECENT_MINUTES else ' (<a href="?minutes=60">last hour</a>)'
         content = (f'<p><span class="dot {band.css}"></span> <strong id="state">{band.label}</strong> for '
                    f"{duration_text(now - since)} · running today: "
                    f'<strong id="utilisation">{_share_text(running_share(trend, now, zone))}</strong></p>'
-                   f"{_legend()}<h2>Last 24 hours</h2>{day}<h2>{_recent_title(recent_minutes)}</h2>{hour}"
-                   f"<h2>Spindle load and feed rate, last hour</h2>{_sparks(trend, now)}"
+                   f"{_legend()}<h2>Last 24 hours</h2>{day}<h2>{_recent_title(recent_minutes)}{zoom}</h2>{hour}"
+                   f"<h2>Spindle load and feed rate, {_recent_title(recent_minutes).lower()}</h2>"
+                   f"{_sparks(trend, now, recent_minutes)}"
                    f"<h2>Alarms today</h2>{_alarms(trend, midnight, zone)}")
     generated = datetime.fromtimestamp(now, zone).isoformat(timespec="seconds")
     return f"""<!doctype html>

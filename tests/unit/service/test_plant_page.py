@@ -148,6 +148,8 @@ async def test_the_recent_timeline_zooms_to_a_few_minutes_and_a_bad_width_is_ref
     widths = [round(float(w)) for w in re.findall(r'class="band [a-z-]+" x="[\d.]+" y="0" width="([\d.]+)"',
                                                    hour.group(0))]
     assert widths == [250, 500, 250]  # 30 s unknown, 60 s running, 30 s held, of 120 s
+    assert "Spindle load and feed rate, last 2 minutes" in page and 'href="?minutes=60"' in page
+    assert 'id="utilisation">0.1 %</strong>' in page  # 60 s of the 11 h since midnight, not "0 %"
     for bad in ("0", "61", "x", "-5"):
         status, page = machine_response(f"/machine/m1?minutes={bad}", pollers, rec)
         assert status == 400 and "expected a whole number of minutes from 1 to 60" in page
