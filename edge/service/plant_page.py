@@ -51,8 +51,9 @@ STYLE = """
 #fleet tr.trouble td{background:#fff3f3}
 svg.timeline{display:block;margin:.2em 0 .8em;background:#fff;border:1px solid #ddd}
 svg.timeline text{font:10px system-ui,sans-serif;fill:#555}svg.timeline line.tick{stroke:#888}
-svg.spark{background:#fff;border:1px solid #ddd}svg.spark polyline{fill:none;stroke:#1565c0;stroke-width:1.5}
-svg.spark circle{fill:#1565c0}.legend>span{margin-right:1em}.sparks{display:flex;gap:2em;flex-wrap:wrap}
+svg.spark{background:#fff;border:1px solid #ddd}svg.spark polyline{fill:none;stroke-width:1.5}
+svg.spark .mean{stroke:#1565c0}svg.spark circle.mean{fill:#1565c0}svg.spark .peak{stroke:#b0c4de}
+svg.spark circle.peak{fill:#b0c4de}.legend>span{margin-right:1em}.sparks{display:flex;gap:2em;flex-wrap:wrap}
 """
 
 
@@ -197,11 +198,11 @@ def _sparks(trend: MachineTrend, now: float, minutes: int) -> str:
     """The sparklines over the same span as the recent timeline (the last hour, or the zoom)."""
     cells = []
     for name, label in SPARK_SERIES.items():
-        points = trend.sparks[name].points(now)[-max(1, round(minutes * 60 / SPARK_STEP_S)):]
-        svg, low, high = sparkline_svg(f"spark-{name.replace('/', '-')}", points)
+        means, peaks = trend.sparks[name].series(now, max(2, round(minutes * 60 / SPARK_STEP_S)))
+        svg, low, high = sparkline_svg(f"spark-{name.replace('/', '-')}", means, peaks)
         scale = "no value in this span" if high is None else f"{low:g} .. {high:g}"
-        cells.append(f"<div><strong>{html.escape(label)}</strong> <small>({html.escape(name)}, peak per 30 s; "
-                     f"{scale})</small><br>{svg}</div>")
+        cells.append(f"<div><strong>{html.escape(label)}</strong> <small>({html.escape(name)}; mean and, faint, "
+                     f"peak per {SPARK_STEP_S:g} s; {scale})</small><br>{svg}</div>")
     return '<div class="sparks">' + "".join(cells) + "</div>"
 
 

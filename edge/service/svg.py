@@ -60,17 +60,25 @@ def timeline_svg(element_id: str, runs: Sequence[tuple[float, float, Band]], sta
             f'data-start="{start:.3f}" data-end="{end:.3f}">' + "".join(parts) + "</svg>")
 
 
-def sparkline_svg(element_id: str, points: Sequence[float | None]) -> tuple[str, float | None, float | None]:
-    """A line through `points` (None breaks it), scaled from 0 (or the lowest value) to the highest;
-    the SVG and the (low, high) of its scale, None when there is no value at all."""
-    values = [p for p in points if p is not None]
+def sparkline_svg(element_id: str, points: Sequence[float | None],
+                  peaks: Sequence[float | None] = ()) -> tuple[str, float | None, float | None]:
+    """A line through `points` (None breaks it) and a faint one through `peaks`, scaled from 0 (or the
+    lowest value) to the highest; the SVG and the (low, high) of its scale, None when there is no value."""
+    values = [p for p in (*points, *peaks) if p is not None]
     if not values:
         return (f'<svg id="{html.escape(element_id)}" class="spark empty" viewBox="0 0 {SPARK_WIDTH:g} '
                 f'{SPARK_HEIGHT:g}" width="{SPARK_WIDTH:g}" height="{SPARK_HEIGHT:g}"></svg>', None, None)
     low, high = min(0.0, min(values)), max(values)
+    shapes = _polylines(peaks, low, high, "peak") + _polylines(points, low, high, "mean")
+    return (f'<svg id="{html.escape(element_id)}" class="spark" viewBox="0 0 {SPARK_WIDTH:g} {SPARK_HEIGHT:g}" '
+            f'width="{SPARK_WIDTH:g}" height="{SPARK_HEIGHT:g}" role="img">{shapes}</svg>', low, high)
+
+
+def _polylines(points: Sequence[float | None], low: float, high: float, css: str) -> str:
+    """Polylines through runs of values (a lone value is a dot)."""
     span = high - low or 1.0
     step = SPARK_WIDTH / max(len(points) - 1, 1)
-    lines: list[list[str]] = []
+    lines: list[list[tuple[float, float]]] = []
     previous = None
     for i, value in enumerate(points):
         if value is None:
@@ -78,11 +86,8 @@ def sparkline_svg(element_id: str, points: Sequence[float | None]) -> tuple[str,
             continue
         if previous is None:
             lines.append([])
-        y = SPARK_HEIGHT - 1 - (value - low) / span * (SPARK_HEIGHT - 2)
-        lines[-1].append(f"{i * step:.1f},{y:.1f}")
+        lines[-1].append((i * step, SPARK_HEIGHT - 1 - (value - low) / span * (SPARK_HEIGHT - 2)))
         previous = value
-    shapes = "".join(f'<polyline points="{" ".join(line)}"/>' if len(line) > 1
-                     else f'<circle r="1.5" cx="{line[0].split(",")[0]}" cy="{line[0].split(",")[1]}"/>'
-                     for line in lines)
-    return (f'<svg id="{html.escape(element_id)}" class="spark" viewBox="0 0 {SPARK_WIDTH:g} {SPARK_HEIGHT:g}" '
-            f'width="{SPARK_WIDTH:g}" height="{SPARK_HEIGHT:g}" role="img">{shapes}</svg>', low, high)
+    return "".join(f'<polyline class="{css}" points="{" ".join(f"{x:.1f},{y:.1f}" for x, y in line)}"/>'
+                   if len(line) > 1 else f'<circle class="{css}" r="1.5" cx="{line[0][0]:.1f}" cy="{line[0][1]:.1f}"/>'
+                   for line in lines)

@@ -205,42 +205,68 @@ class HourBands:
 
 
 class Sparkline:
-    """One series over the last hour: the peak of each 30 s step (the value held since the last change
-    counts: values come by exception). NaN where there was no value (offline, a refused read)."""
+    """One series over the last hour, per 30 s step: the time-weighted mean and the peak. Values come by
+    exception, so a value counts for as long as it was held; NaN where there was none (offline, a refused
+    read). The mean shows how hard the machine worked, the peak a spike the mean would hide."""
 
     def __init__(self) -> None:
+        self.means = array("d", [math.nan] * SPARK_POINTS)
         self.peaks = array("d", [math.nan] * SPARK_POINTS)
         self.step: int | None = None  # the step being filled
         self.last: float | None = None
+        self.mark = 0.0  # the current step is accounted up to here
+        self.area = 0.0  # value x seconds in the current step
+        self.covered = 0.0  # seconds of the current step with a value
+
+    def _account(self, until: float) -> None:
+        if self.last is not None and until > self.mark:
+            self.area += self.last * (until - self.mark)
+            self.covered += until - self.mark
+        self.mark = max(self.mark, until)
 
     def _advance(self, now: float) -> None:
+        """Close every step before `now`'s (whole steps in between hold the last value), account up to now."""
         step = int(now // SPARK_STEP_S)
         if self.step is None:
-            self.step = step
-        if step <= self.step:
-            return
-        carried = math.nan if self.last is None else self.last
-        for s in range(self.step + 1, min(step, self.step + SPARK_POINTS) + 1):
-            self.peaks[s % SPARK_POINTS] = carried
-        self.step = step
+            self.step, self.mark = step, now
+        while self.step < step:
+            self._account((self.step + 1) * SPARK_STEP_S)
+            slot = self.step % SPARK_POINTS
+            self.means[slot] = self.area / self.covered if self.covered > 0 else math.nan
+            self.step += 1
+            self.area = self.covered = 0.0
+            self.peaks[self.step % SPARK_POINTS] = math.nan if self.last is None else self.last
+            if step - self.step > SPARK_POINTS:  # a long quiet spell: every step in the hour held the last value
+                held = math.nan if self.last is None else self.last
+                self.means[:] = array("d", [held] * SPARK_POINTS)
+                self.peaks[:] = array("d", [held] * SPARK_POINTS)
+                self.step, self.mark = step, step * SPARK_STEP_S
+        self._account(now)
 
     def record(self, now: float, value: float | None) -> None:
         self._advance(now)
         assert self.step is not None
         slot = self.step % SPARK_POINTS
-        if value is not None:
-            peak = self.peaks[slot]
-            self.peaks[slot] = value if math.isnan(peak) or value > peak else peak
+        if value is not None and not value <= self.peaks[slot]:  # NaN compares false: the first value is a peak
+            self.peaks[slot] = value
         self.last = value
 
-    def points(self, now: float) -> list[float | None]:
-        """The last hour, oldest first, one value (or None) per step."""
+    def series(self, now: float, steps: int = SPARK_POINTS) -> tuple[list[float | None], list[float | None]]:
+        """The last `steps` steps, oldest first: (means, peaks), None where there was no value."""
         if self.step is None:
-            return [None] * SPARK_POINTS
+            return [None] * steps, [None] * steps
         self._advance(now)
         newest = self.step
-        values = [self.peaks[s % SPARK_POINTS] for s in range(newest - SPARK_POINTS + 1, newest + 1)]
-        return [None if math.isnan(v) else v for v in values]
+        held = math.nan if self.last is None else self.last  # a step just begun shows the value held
+        self.means[newest % SPARK_POINTS] = self.area / self.covered if self.covered > 0 else held
+        window = range(newest - steps + 1, newest + 1)
+        means = [self.means[s % SPARK_POINTS] for s in window]
+        peaks = [self.peaks[s % SPARK_POINTS] for s in window]
+        return [None if math.isnan(v) else v for v in means], [None if math.isnan(v) else v for v in peaks]
+
+    def points(self, now: float) -> list[float | None]:
+        """The last hour's means, oldest first."""
+        return self.series(now)[0]
 
 
 @dataclass(frozen=True, slots=True)

@@ -108,7 +108,7 @@ async def test_sparklines_and_the_alarms_of_today_only() -> None:
         await rec.device_events("m1", [s("Alarm/Event", json.dumps(event))])
     page = render_machine("m1", poller(), rec.machine("m1"), NOON)
     assert "COOLANT &lt;LOW&gt;" in page and "YESTERDAY" not in page and "<td>11:59:00</td>" in page
-    assert re.search(r'<svg id="spark-Spindle-1-Load" class="spark".*?<polyline points="[^"]+"', page)
+    assert re.search(r'<svg id="spark-Spindle-1-Load" class="spark".*?<polyline class="mean" points="[^"]+"', page)
     assert "0 .. 42" in page and "0 .. 1200" in page
 
 
@@ -130,8 +130,9 @@ def test_timeline_clips_to_its_window_and_a_sparkline_breaks_at_gaps() -> None:
                        lambda t: str(t))
     assert re.findall(r'class="band (\w+)" x="([\d.]+)" y="0" width="([\d.]+)"', svg) == [
         ("idle", "0.000", "250.000"), ("running", "250.000", "750.000")]
-    line, low, high = sparkline_svg("sp", [1.0, 2.0, None, 4.0, None, 3.0, 3.5])
-    assert (low, high) == (0.0, 4.0) and line.count("<polyline") == 2 and line.count("<circle") == 1
+    line, low, high = sparkline_svg("sp", [1.0, 2.0, None, 4.0, None, 3.0, 3.5], [1.0, 5.0] + [None] * 5)
+    assert (low, high) == (0.0, 5.0) and line.count('<polyline class="mean"') == 2
+    assert line.count('<circle class="mean"') == 1 and line.count('<polyline class="peak"') == 1
     assert sparkline_svg("sp", [None, None])[1:] == (None, None)
     assert (duration_text(12), duration_text(270), duration_text(3900)) == ("12 s", "4 min 30 s", "1 h 05 min")
 

@@ -135,26 +135,30 @@ async def test_the_hour_forgets_older_transitions_and_is_capped() -> None:
                                              Band.FEED_HOLD]
 
 
-async def test_sparkline_peaks_per_step_carry_the_held_value_and_break_while_offline() -> None:
+async def test_sparkline_means_are_weighted_by_time_held_peaks_kept_and_offline_breaks_the_line() -> None:
     clock = Clock()
     rec = TrendRecorder(clock)
     load = "Spindle/1/Load"
-    await rec.device_data("m1", [s(load, 10.0, MetricType.DOUBLE)])
+    await rec.device_data("m1", [s(load, 10.0, MetricType.DOUBLE)])  # 0..5 s
     clock.now += 5
-    await rec.device_data("m1", [s(load, 30.0, MetricType.DOUBLE)])
+    await rec.device_data("m1", [s(load, 40.0, MetricType.DOUBLE)])  # 5..10 s
     clock.now += 5
-    await rec.device_data("m1", [s(load, 20.0, MetricType.DOUBLE)])  # step 0: peak 30
+    await rec.device_data("m1", [s(load, 20.0, MetricType.DOUBLE)])  # 10 s on: step 0 = (50 + 200 + 400) / 30
     clock.now = T0 + 95  # steps 1 and 2 held 20, step 3 now
     await rec.device_offline("m1")
     clock.now = T0 + 125  # step 4: offline
     trend = rec.machine("m1")
     assert trend is not None
-    points = trend.sparks[load].points(clock.now)
-    assert len(points) == SPARK_POINTS
-    assert points[-5:] == [30.0, 20.0, 20.0, 20.0, None]
-    assert all(p is None for p in points[:-5])
+    means, peaks = trend.sparks[load].series(clock.now)
+    assert len(means) == len(peaks) == SPARK_POINTS
+    assert [None if m is None else round(m, 3) for m in means[-5:]] == [21.667, 20.0, 20.0, 20.0, None]
+    assert peaks[-5:] == [40.0, 20.0, 20.0, 20.0, None]
+    assert all(p is None for p in means[:-5] + peaks[:-5])
     await rec.device_data("m1", [Sample(load, None, MetricType.DOUBLE, 0, Quality.BAD)])
     assert trend.sparks[load].points(clock.now)[-1] is None
+    await rec.device_data("m1", [s(load, 50.0, MetricType.DOUBLE)])
+    clock.now = T0 + 10 * 3600  # ten quiet hours: the whole hour held 50
+    assert set(trend.sparks[load].series(clock.now)[0]) == {50.0}
 
 
 async def test_alarm_events_are_kept_capped_and_bad_ones_ignored() -> None:
