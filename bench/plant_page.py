@@ -13,6 +13,7 @@ import random
 import statistics
 import time
 import tracemalloc
+from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import Any
 from zoneinfo import ZoneInfo
@@ -98,9 +99,9 @@ def measure(size: int) -> dict[str, Any]:
             "machine_page_ms_best": round(page_best, 2), "machine_page_ms_median": round(page_median, 2)}
 
 
-def run(quick: bool = False) -> Result:
+def run(quick: bool = False, sizes: Sequence[int] | None = None) -> Result:
     result = Result("plantpage", "python -m bench plantpage")
-    result.rows = [measure(size) for size in (SIZES[:1] if quick else SIZES)]
+    result.rows = [measure(size) for size in (sizes or (SIZES[:1] if quick else SIZES))]
     biggest = result.rows[-1]
     result.checks.append(Check(f"fleet overview render at {biggest['machines']} machines",
                                biggest["fleet_render_ms_median"], FLEET_RENDER_TARGET_MS, "<=", " ms"))
