@@ -70,7 +70,7 @@ async def main(seconds: float, out: Path) -> int:
                                       f"--screenshot={out / 'plant-machine.png'}", "--window-size=1100,820",
                                       "--virtual-time-budget=1000")
                     await run_browser(binary, f"{base}/", f"--screenshot={out / 'plant-fleet.png'}",
-                                      "--window-size=1100,420", "--virtual-time-budget=1000")
+                                      "--window-size=1100,470", "--virtual-time-budget=1000")
                 finally:
                     daemon.request_stop()
                     await asyncio.wait_for(task, 20)

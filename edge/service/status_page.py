@@ -257,8 +257,8 @@ def render_page(doc: Mapping[str, Any], top: str = "") -> str:
 <dt>writes</dt><dd id="writes">{"on" if g["writes_enabled"] else "off"}</dd>
 <dt>machines</dt><dd id="count">{g["machines_connected"]} of {g["machines"]} connected</dd>
 </dl>
-{render_gateway_block(g["identity"], g["broker"])}
 {top}
+{render_gateway_block(g["identity"], g["broker"])}
 <table><thead><tr>{"".join(f"<th>{c}</th>" for c in _COLUMNS)}</tr></thead>
 <tbody id="machines">
 {rows}
