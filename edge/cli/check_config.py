@@ -110,7 +110,7 @@ def summary(config: Config, source: str) -> str:
         host = f", primary host {sp.primary_host_id}" if sp.primary_host_id else ""
         lines.append(f"  sparkplug  spBv1.0/{sp.group_id}/+/{sp.edge_node_id}{host}")
     if "json" in mqtt.formats:
-        lines.append(f"  json       {mqtt.json_topics.prefix}/<machine>/...")
+        lines.append(f"  json       {mqtt.json_prefix}/<machine>/...")
     if config.opcua.enabled:
         ua = config.opcua
         who = ", ".join([u.username for u in ua.users] + (["anonymous"] if ua.allow_anonymous else []))

@@ -4,7 +4,7 @@
 edge.collect.execution); this module adds what needs memory across ticks and sessions:
 `Status/Availability` (AVAILABLE in the birth, UNAVAILABLE published just before the device goes offline) and
 the `Utilisation/...` counters (edge.collect.utilisation), told of a new state only when the status word
-changed, published on a change of state and once a minute, saved to state_dir at each minute and at close.
+changed, published on a change of state and once a minute, saved to state_dir every 5 minutes and at close.
 
 UNAVAILABLE and the OFFLINE switch are stamped with the gateway's estimate of CNC time at the moment the poller
 found the session broken (the CNC cannot stamp its own absence; the true drop lies between the last answer and
@@ -31,6 +31,9 @@ log = logging.getLogger(__name__)
 
 SPECS: tuple[MetricSpec, ...] = (AVAILABILITY, *ut.SPECS)
 MINUTE_S = 60.0
+# A save (atomic write, two fsyncs) costs ~0.7 ms of CPU: every 5th minute keeps it near 0.2 µs per machine-cycle
+# at 10 Hz; a crash loses at most 5 minutes to UNKNOWN (a stop or reload saves at once).
+SAVE_EVERY_MINUTES = 5
 
 
 class PlantState:
@@ -97,11 +100,16 @@ class PlantState:
     # ---- the minute task and saving --------------------------------------------------------------------
     async def run_minutes(self, now_ms: Callable[[], int], publish: Callable[[Sequence[Sample]], Awaitable[None]],
                           wall: Callable[[], float] = time.time) -> None:
-        """Once a minute (and at local midnight): count, publish, save. Runs until cancelled."""
+        """Once a minute (and at local midnight): count, publish; every SAVE_EVERY_MINUTES, save. Runs until
+        cancelled."""
+        minutes = 0
         while True:
             await asyncio.sleep(self.next_delay_s(wall(), now_ms()))
             samples = self.minute(now_ms())
             await publish(samples)
+            minutes += 1
+            if minutes % SAVE_EVERY_MINUTES:
+                continue
             sequence, data = self._snapshot()
             try:
                 await asyncio.to_thread(self.store.save, sequence, data)

@@ -11,7 +11,7 @@ from typing import Any
 
 from pydantic import ByteSize, Field, PrivateAttr, field_validator, model_validator
 
-from edge.config.fields import Duration, _Model
+from edge.config.fields import Duration, HostName, _Model
 from edge.config.machines import AlarmsConfig, MachineConfig
 from edge.config.mqtt import MqttConfig
 from edge.config.opcua import OpcUaConfig
@@ -23,7 +23,7 @@ DEFAULT_STATE_DIR = Path("/var/lib/focas-edge")
 
 class HttpConfig(_Model):
     enabled: bool = False
-    host: str = "127.0.0.1"
+    host: HostName = "127.0.0.1"
     port: int = Field(default=9108, ge=1, le=65535)
     healthy_share: float = Field(default=0.5, ge=0.0, le=1.0)
 

@@ -16,6 +16,7 @@ from edge.collect import (
 )
 from edge.command import AllowRule, CommandSettings, RateLimit, WritePolicy
 from edge.config import AlarmsConfig, Config, MachineConfig, PollPlan
+from edge.config.mqtt import gateway_name
 from edge.opcua.settings import OpcUaSettings
 from edge.publish.settings import PublishSettings
 
@@ -38,13 +39,15 @@ def publish_settings(config: Config) -> PublishSettings:
         protocol=mqtt.protocol,
         keepalive=mqtt.keepalive,
         formats=frozenset(mqtt.formats),
-        json_prefix=mqtt.json_topics.prefix,
+        json_prefix=mqtt.json_prefix,
         state_dir=config.resolved_state_dir,
     )
     if mqtt.client_id:
         settings.client_id = mqtt.client_id
     elif spb is not None:
         settings.client_id = f"focas-edge-{spb.group_id}-{spb.edge_node_id}"
+    else:  # JSON only: two gateways must not share a client id (the broker would take turns kicking them)
+        settings.client_id = f"focas-edge-{gateway_name()}"
     if spb is not None:
         settings.group_id = spb.group_id
         settings.edge_node_id = spb.edge_node_id

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 from datetime import date, datetime
@@ -13,6 +14,7 @@ import pytest
 from edge.collect.plant_state import PlantState
 from edge.collect.utilisation import UtilisationCounter, UtilisationStore
 from edge.focas.model import StatInfo
+from tests.helpers import async_wait_for
 
 BERLIN = ZoneInfo("Europe/Berlin")
 CUTTING = StatInfo(1, 3, 1, 0, 0, 0, 0)
@@ -151,3 +153,25 @@ def test_a_late_save_does_not_overwrite_a_newer_one(tmp_path: Path) -> None:
     store.save(2, {"format": 1, "n": "newer"})
     store.save(1, {"format": 1, "n": "older"})
     assert json.loads(store.path.read_text())["n"] == "newer"
+
+
+async def test_the_minute_task_publishes_every_minute_and_saves_every_fifth(tmp_path: Path) -> None:
+    state = PlantState("m1", BERLIN, tmp_path, now_ms=ms("2026-06-10 06:00:00"))
+    clock = [ms("2026-06-10 06:00:00")]
+
+    def now_ms() -> int:  # asked twice a round: a minute passes per round
+        clock[0] += 30_000
+        return clock[0]
+
+    saved_before: list[bool] = []  # at each publish: was the file already written?
+
+    async def publish(samples: object) -> None:
+        saved_before.append(state.store.path.exists())
+
+    task = asyncio.create_task(state.run_minutes(now_ms, publish, wall=lambda: state._phase_s + 59.99))
+    try:
+        await async_wait_for(lambda: len(saved_before) >= 6, timeout=10, message="six minute publishes")
+    finally:
+        task.cancel()
+    assert saved_before[:6] == [False] * 5 + [True]
+    assert json.loads(state.store.path.read_text())["seconds"]["OFFLINE"] == 5 * 60
