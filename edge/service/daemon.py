@@ -34,6 +34,7 @@ from edge.service.settings import command_settings, machine_settings, opcua_sett
 from edge.service.state_lock import StateDirLock
 from edge.service.status_gateway import systemd_status
 from edge.service.status_http import StatusServer
+from edge.service.trend_store import close_trends, keep_saved, open_trends
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +67,8 @@ class Daemon:
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
-        self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
+        self.trends = open_trends(self.state_dir, (m.id for m in config.devices()))  # what the plant page draws
+        self.outputs = Outputs(self.publisher, [self.trends] + ([self.opcua] if self.opcua is not None else []))
         self.publisher.on_device_command = self.commands.on_device_commands
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.node_metrics_source = self.node_metrics
@@ -122,7 +124,8 @@ class Daemon:
             self._start_machine(machine, spread)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
-        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
+        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics"),
+                      asyncio.create_task(keep_saved(self.trends, self.state_dir), name="plant-timelines")]
         if self.notifier.enabled:
             background.append(asyncio.create_task(self._systemd_status_loop(), name="systemd-status"))
         interval = self.notifier.watchdog_interval()
@@ -164,6 +167,7 @@ class Daemon:
         if self.status_http is not None:
             await self.status_http.stop()
             self.status_http = None
+        close_trends(self.trends, self.state_dir)
         self.lock.release()  # last: nothing of this daemon touches state_dir any more
         log.info("stopped")
 
@@ -199,8 +203,8 @@ class Daemon:
         except Exception as exc:
             log.error("OPC UA server not started, running without it endpoint=%s error=%r",
                       self.opcua.settings.endpoint, exc)
+            self.outputs.others.remove(self.opcua)
             self.opcua = None
-            self.outputs.others.clear()
 
     def _install_signals(self) -> None:
         loop = asyncio.get_running_loop()
@@ -271,6 +275,8 @@ class Daemon:
         self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
+        for machine_id in removed:
+            self.trends.forget(machine_id)
         for machine_id in changed + added:
             self._start_machine(fresh[machine_id])
         log.info("reloaded added=%s removed=%s changed=%s", added, removed, changed)

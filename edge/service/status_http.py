@@ -27,6 +27,7 @@ from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 from edge import __version__
 from edge.collect import CYCLE_BUCKETS
 from edge.service.daemon_view import DaemonView, spool_depth
+from edge.service.plant_page import fleet_block, machine_response
 from edge.service.status_gateway import broker_document, broker_text
 from edge.service.status_page import RateMeter, page_json, render_page, status_document
 
@@ -234,12 +235,18 @@ class StatusServer:
             return _json(200 if health.ok else 503, health.document())
         if route == "/metrics":
             return Response(200, CONTENT_TYPE_LATEST, generate_latest(self.registry))
+        trends = getattr(self.daemon, "trends", None)
         if route in ("/", "/status.json"):
             doc = status_document(self.daemon, self.rates)
             if route == "/":
-                return Response(200, "text/html; charset=utf-8", render_page(doc).encode())
+                top = fleet_block(self.daemon.pollers, trends) if trends is not None else ""
+                return Response(200, "text/html; charset=utf-8", render_page(doc, top).encode())
             return Response(200, "application/json", page_json(doc))
-        return _json(404, {"error": f"no such path {route!r}; expected /, /status.json, /healthz or /metrics"})
+        if trends is not None and (route == "/fleet" or route.startswith("/machine/")):
+            status, body = machine_response(path, self.daemon.pollers, trends)
+            return Response(status, "text/html; charset=utf-8", body.encode())
+        return _json(404, {"error": f"no such path {route!r}; expected /, /status.json, /healthz, /metrics, "
+                                    "/fleet or /machine/<id>"})
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()

@@ -261,8 +261,9 @@ def _errors_cell(machine: Mapping[str, Any]) -> str:
     return "<br>".join(lines) or "<span class=\"muted\">none</span>"
 
 
-def render_page(doc: Mapping[str, Any]) -> str:
-    """The whole page, filled in from `doc` (the script then keeps it current)."""
+def render_page(doc: Mapping[str, Any], top: str = "") -> str:
+    """The whole page, filled in from `doc` (the script then keeps it current); `top` goes above the table
+    (the plant page's fleet overview, edge.service.plant_page)."""
     g = doc["gateway"]
     rows = "\n".join(_row(m) for m in doc["machines"])
     conflict = g["identity_conflict"]
@@ -282,6 +283,7 @@ def render_page(doc: Mapping[str, Any]) -> str:
 <dt>machines</dt><dd id="count">{g["machines_connected"]} of {g["machines"]} connected</dd>
 <dt>identity conflict</dt><dd id="identity-conflict" class="{conflict_class}">{conflict_text(conflict)}</dd>
 </dl>
+{top}
 {render_gateway_block(g["identity"], g["broker"])}
 <table><thead><tr>{"".join(f"<th>{c}</th>" for c in _COLUMNS)}</tr></thead>
 <tbody id="machines">

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import codec, fleet, floor, outage, reload, roundtrip, writes
+from bench import codec, fleet, floor, outage, plant_page, reload, roundtrip, writes
 from bench.__main__ import main
 from bench.report import percentile
 from bench.simproc import stamp_latency, stamp_value
@@ -82,6 +82,13 @@ def test_writes_reports_latency_for_both_transports() -> None:
     assert result.status == "ok", result.notes
     assert {row["transport"] for row in result.rows} == {"focas", "packed"}
     assert all(row["failed"] == 0 and row["p99_ms"] >= row["p50_ms"] > 0 for row in result.rows)
+
+
+def test_plant_page_renders_a_fleet_with_a_day_of_history() -> None:
+    result = plant_page.run(sizes=[3])
+    (row,) = result.rows
+    assert row["machines"] == 3 and row["fleet_render_ms_median"] > 0 and row["machine_page_ms_median"] > 0
+    assert row["kb_per_machine"] > 0 and row["record_us_per_batch"] > 0 and len(result.checks) == 2
 
 
 def test_cli_saves_json(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
