@@ -23,11 +23,12 @@ from edge.service.logformat import LOG_FORMATS, configure_logging
 # where handler(args) -> int returns the exit code.
 SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config", "fwlib_host"]
 
-__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "SUBCOMMANDS", "build_parser", "main"]
+__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_PARTIAL", "EXIT_USAGE", "SUBCOMMANDS", "build_parser", "main"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
+EXIT_PARTIAL = 3  # `read`: every item answered something, but the CNC refused some parts of a composite
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a command killed by SIGPIPE
 
 

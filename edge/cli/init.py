@@ -43,6 +43,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help="also write the systemd units and drop-ins the package carries into DIR, running this "
                              "installation's focas-edge (e.g. a venv's: then `systemctl link` them or copy them to "
                              "/etc/systemd/system)")
+    parser.add_argument("--acl", nargs="?", const="", metavar="FILE",
+                        help="also write a mosquitto acl_file in which only the MES account may send commands and "
+                             "only the gateway's account may publish its topics (default FILE: mosquitto.acl beside "
+                             "the config; see docs/writes.md)")
+    parser.add_argument("--acl-users", default="edge:mes", metavar="GATEWAY:MES",
+                        help="the broker accounts the ACL names (default edge:mes)")
     parser.set_defaults(func=handle)
 
 
@@ -129,6 +135,12 @@ def handle(args: argparse.Namespace) -> int:
     output = None if args.output == "-" else Path(args.output)
     if output is not None and output.exists() and not args.force:
         return _usage(f"{output} exists; use --force to overwrite it")
+    acl = _acl_path(args, output)
+    if acl is not None and acl.exists() and not args.force:
+        return _usage(f"{acl} exists; use --force to overwrite it")
+    users = args.acl_users.split(":")
+    if len(users) != 2 or not all(users) or any(c in args.acl_users for c in " #+/") or users[0] == users[1]:
+        return _usage(f"--acl-users {args.acl_users!r}: expected GATEWAY:MES, two different account names")
     if args.units is not None:
         from edge.config.bundled import write_bundled
 
@@ -159,6 +171,8 @@ def handle(args: argparse.Namespace) -> int:
         print("focas-edge init: no CNC answered; nothing written", file=sys.stderr)
         return EXIT_FAILURE
     text = render_config(reached, missed, broker_host, broker_port, args.group, node)
+    if acl is not None:
+        _write_acl(acl, text, users[0], users[1])
     if output is None:
         sys.stdout.write(text)
     else:
@@ -166,3 +180,24 @@ def handle(args: argparse.Namespace) -> int:
         print(f"wrote {output}: {len(reached)} machine(s); check it with `focas-edge check-config {output}`",
               file=sys.stderr)
     return EXIT_FAILURE if missed else EXIT_OK
+
+
+def _acl_path(args: argparse.Namespace, output: Path | None) -> Path | None:
+    """Where --acl writes: the path given, else mosquitto.acl beside the config (or here, for stdout)."""
+    if args.acl is None:
+        return None
+    if args.acl:
+        return Path(args.acl)
+    return (output.parent if output is not None else Path.cwd()) / "mosquitto.acl"
+
+
+def _write_acl(path: Path, config_text: str, gateway_user: str, mes_user: str) -> None:
+    """The ACL for the config just rendered, read back as the daemon will read it (prefixes, ids)."""
+    from edge.config import parse_config
+    from edge.service.broker_acl import render_acl
+
+    config = parse_config(config_text, source="the config written", secrets=False)
+    path.write_text(render_acl(config, gateway_user, mes_user), encoding="utf-8")
+    print(f"wrote {path}: only account {mes_user!r} may send commands, only {gateway_user!r} may publish as the "
+          f"gateway; in mosquitto.conf: allow_anonymous false, password_file FILE, acl_file {path.absolute()}",
+          file=sys.stderr)

@@ -1,9 +1,11 @@
 """The named reads of `focas-edge read` (sysinfo, status, program, loads, timers ...): which read items
 each needs, which of them may fail alone, and how their results become the printed value.
 
-Every function the client has is reachable here by one name. A composite read degrades per part: a part
-listed in `parts` that fails (a position kind a control does not have) is left out of the value and
-named on stderr; the item fails only when a required item or every part failed.
+Every function the client has is reachable here by one name. A composite read (one that gathers several
+functions) degrades part by part, as the daemon degrades per function: each part names the items it needs;
+a part with a refused item (a position kind an EDM does not have, the executing program's name on a 16i-W,
+spindle names on a 31i lathe) is left out of the value and named with its return code; the read fails only
+when every part was refused.
 """
 
 from __future__ import annotations
@@ -20,18 +22,22 @@ TIMER_KINDS = ("power_on", "operating", "cutting", "cycle", "free")  # cnc_rdtim
 TOOL_OFFSETS_SHOWN = 16  # offsets 1..16 of each kind
 
 
+Parts = dict[str, tuple[int, ...]]  # part name -> indices of the items it needs
+
+
 @dataclass(frozen=True, slots=True)
 class NamedRead:
-    """The read items of one named read; `parts` maps item index -> part name for items that may fail alone
-    (the shaper then gets None in their place)."""
+    """The read items of one named read; `parts` names what may fail alone: each part lists the indices of the
+    items it needs (axis names serve every position kind). The shaper gets None for every refused item, so it
+    leaves out what those items fed."""
 
     items: tuple[it.ReadItem, ...]
     shape: Shaper
-    parts: dict[int, str] = field(default_factory=dict)
+    parts: Parts = field(default_factory=dict)
 
 
-def _by_name(names: Sequence[object], values: Sequence[object] | None) -> dict[str, object] | None:
-    if values is None:
+def _by_name(names: Sequence[object] | None, values: Sequence[object] | None) -> dict[str, object] | None:
+    if names is None or values is None:
         return None
     return {str(name): value for name, value in zip(names, values, strict=False)}
 
@@ -40,7 +46,7 @@ def _positions(results: list[Any]) -> object:
     names, *kinds = results
     table: dict[str, dict[str, object]] = {}
     for kind, values in zip(it.POSITION_KINDS, kinds, strict=True):
-        if values is None:  # this kind failed alone
+        if values is None or names is None:  # this kind was refused
             continue
         for name, value in zip(names, values, strict=False):
             table.setdefault(str(name), {})[kind] = value
@@ -49,7 +55,11 @@ def _positions(results: list[Any]) -> object:
 
 def _program(results: list[Any]) -> object:
     numbers, sequence, executing, path = results
-    value: dict[str, object] = {"running": numbers.running, "main": numbers.main, "sequence": sequence}
+    value: dict[str, object] = {}
+    if numbers is not None:
+        value |= {"running": numbers.running, "main": numbers.main}
+    if sequence is not None:
+        value["sequence"] = sequence
     if executing is not None:
         value["name"] = executing.name
     if path is not None:
@@ -82,8 +92,9 @@ def _work_offsets(results: list[Any]) -> object:
             if values is not None}
 
 
-def _named_parts(names: Sequence[str], first: int = 0) -> dict[int, str]:
-    return {first + index: name for index, name in enumerate(names)}
+def _named_parts(names: Sequence[str], first: int = 0, shared: tuple[int, ...] = ()) -> Parts:
+    """One part per name, on consecutive items from `first`, each also needing the `shared` items."""
+    return {name: (*shared, first + index) for index, name in enumerate(names)}
 
 
 def _dropping_none(names: Sequence[str]) -> Shaper:
@@ -93,20 +104,20 @@ def _dropping_none(names: Sequence[str]) -> Shaper:
 NAMED_READS: dict[str, NamedRead] = {
     "sysinfo": NamedRead((it.ReadSysInfo(),), lambda r: r[0]),
     "status": NamedRead((it.ReadStatus(),), lambda r: r[0]),
-    "alarms": NamedRead((it.ReadAlarmStatus(), it.ReadActiveAlarms(32)),
-                        lambda r: {"status": r[0], "active": r[1]}),
+    "alarms": NamedRead((it.ReadAlarmStatus(), it.ReadActiveAlarms(32)), _dropping_none(("status", "active")),
+                        _named_parts(("status", "active"))),
     "program": NamedRead((it.ReadProgramNumber(), it.ReadSequenceNumber(), it.ReadExecProgramName(),
-                          it.ReadMainProgramPath()), _program, {2: "name", 3: "path"}),
+                          it.ReadMainProgramPath()), _program, _named_parts(("number", "sequence", "name", "path"))),
     "programs": NamedRead((it.ReadProgramDirectory(),), lambda r: r[0]),
     "positions": NamedRead((it.ReadAxisNames(), *(it.ReadPositions(kind) for kind in it.POSITION_KINDS)),
-                           _positions, _named_parts(it.POSITION_KINDS, first=1)),
-    "axes": NamedRead((it.ReadAxisNames(), it.ReadControlledAxes()),
-                      lambda r: {"names": r[0], "controlled": r[1]}),
+                           _positions, _named_parts(it.POSITION_KINDS, first=1, shared=(0,))),
+    "axes": NamedRead((it.ReadAxisNames(), it.ReadControlledAxes()), _dropping_none(("names", "controlled")),
+                      _named_parts(("names", "controlled"))),
     "spindles": NamedRead((it.ReadSpindleNames(),), lambda r: {"names": r[0]}),
     "speeds": NamedRead((it.ReadFeed(), it.ReadSpindleSpeed()), _dropping_none(("feed", "spindle")),
                         _named_parts(("feed", "spindle"))),
     "loads": NamedRead((it.ReadAxisNames(), it.ReadServoMeter(), it.ReadSpindleNames(), it.ReadSpindleLoad()),
-                       _loads, {1: "servo", 3: "spindle"}),
+                       _loads, {"servo": (0, 1), "spindle": (2, 3)}),
     "timers": NamedRead(tuple(it.ReadTimer(kind) for kind in range(len(TIMER_KINDS))),
                         _dropping_none(TIMER_KINDS), _named_parts(TIMER_KINDS)),
     "messages": NamedRead((it.ReadOperatorMessages(),), lambda r: r[0]),
@@ -114,7 +125,7 @@ NAMED_READS: dict[str, NamedRead] = {
                                     for kind in range(len(it.TOOL_OFFSET_KINDS))),
                               _tool_offsets, _named_parts(it.TOOL_OFFSET_KINDS)),
     "work_offsets": NamedRead((it.ReadAxisNames(), *(it.ReadWorkOffsets(n) for n in range(1, 7))),
-                              _work_offsets, _named_parts(WORK_OFFSET_CODES, first=1)),
+                              _work_offsets, _named_parts(WORK_OFFSET_CODES, first=1, shared=(0,))),
     "modal": NamedRead((it.ReadModalGCodes(),), lambda r: {str(m.group): m.code for m in r[0]}),
     "tool_number": NamedRead((it.ReadToolNumber(),), lambda r: r[0]),
     "clock": NamedRead((it.ReadClock(),), lambda r: r[0]),

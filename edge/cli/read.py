@@ -1,8 +1,10 @@
 """`focas-edge read HOST[:PORT] ITEM...`: read items from one CNC in one batched request and print them.
 
 Items use the target grammar of edge.focas.targets (macro:500-505, param:1815/1, pmc:D2204.word, sysinfo ...).
-A readable table by default; `--json` prints one JSON object per item per line: {item, value, error}.
-Exit 0 when every item was read, 1 when any item (or the connection) failed, 2 on bad usage.
+A readable table by default; `--json` prints one JSON object per item per line: {item, value, error, refused}
+(`refused`: each part of a composite the CNC refused, with its return code).
+Exit 0 when every item and part was read, 3 when every item answered but some parts were refused, 1 when
+an item (or the connection) failed whole, 2 on bad usage.
 """
 
 from __future__ import annotations
@@ -11,14 +13,14 @@ import argparse
 import asyncio
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field, is_dataclass, replace
 from datetime import datetime
 from typing import Any, TypeVar
 
 from edge import ConfigError
-from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
-from edge.cli.named_reads import NAMED_READS, Shaper
+from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_PARTIAL, EXIT_USAGE
+from edge.cli.named_reads import NAMED_READS, Parts, Shaper
 from edge.collect import refused_as_axis_type
 from edge.focas import items as it
 from edge.focas.errors import CncError, FocasError
@@ -107,13 +109,13 @@ def json_value(value: object) -> object:
 class ReadPlan:
     """The read items one CLI item needs and how their results become the printed value.
 
-    `parts` names items that may fail alone (a composite such as positions degrades per kind): the shaper
-    gets None for a failed part, and the item fails only when every part failed."""
+    `parts` names what may fail alone (a composite degrades part by part): the shaper gets None for every
+    refused item, and the item fails only when every part was refused."""
 
     text: str
     items: tuple[it.ReadItem, ...]
     shape: Shaper
-    parts: dict[int, str] = field(default_factory=dict)
+    parts: Parts = field(default_factory=dict)
     per_axis: ReadPlan | None = None  # an axis-0 number refused as axis-type is read this way instead
 
 
@@ -184,20 +186,25 @@ class ItemOutcome:
 
 
 def _outcome(plan: ReadPlan, results: list[Any]) -> ItemOutcome:
-    """One CLI item from its results: failed parts are left out; any other failure fails the item."""
-    failed_parts = tuple((plan.parts[i], r) for i, r in enumerate(results)
-                         if i in plan.parts and isinstance(r, BaseException))
-    required = [r for i, r in enumerate(results) if i not in plan.parts]
-    failed = next((r for r in required if isinstance(r, BaseException)), None)
-    if failed is None and plan.parts and len(failed_parts) == len(plan.parts):
-        failed = failed_parts[0][1]
+    """One CLI item from its results: refused parts are left out and named; the item fails when an item that
+    belongs to no part failed, or when every part was refused."""
+    refused = tuple((name, error) for name, indices in plan.parts.items()
+                    if (error := _first_error(results[i] for i in indices)) is not None)
+    in_parts = {i for indices in plan.parts.values() for i in indices}
+    failed = _first_error(r for i, r in enumerate(results) if i not in in_parts)
+    if failed is None and plan.parts and len(refused) == len(plan.parts):
+        failed = refused[0][1]
     if failed is not None:
-        return ItemOutcome(plan.text, error=failed)
-    shaped = [None if i in plan.parts and isinstance(r, BaseException) else r for i, r in enumerate(results)]
+        return ItemOutcome(plan.text, error=failed, part_errors=refused)
+    shaped = [None if isinstance(r, BaseException) else r for r in results]
     try:
-        return ItemOutcome(plan.text, plan.shape(shaped), part_errors=failed_parts)
+        return ItemOutcome(plan.text, plan.shape(shaped), part_errors=refused)
     except (IndexError, TypeError, ValueError, AttributeError) as exc:
         return ItemOutcome(plan.text, error=FocasError(f"unexpected answer shape: {exc}"))
+
+
+def _first_error(results: Iterable[Any]) -> BaseException | None:
+    return next((r for r in results if isinstance(r, BaseException)), None)
 
 
 async def read_all(session: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
@@ -234,7 +241,8 @@ async def read_batch(cnc: Any, plans: Sequence[ReadPlan]) -> list[ItemOutcome]:
 def print_json(outcomes: Sequence[ItemOutcome]) -> None:
     for outcome in outcomes:
         print(json.dumps({"item": outcome.item, "value": json_value(outcome.value),
-                          "error": error_object(outcome.error) if outcome.error else None}))
+                          "error": error_object(outcome.error) if outcome.error else None,
+                          "refused": {part: error_object(error) for part, error in outcome.part_errors}}))
 
 
 def print_table(outcomes: Sequence[ItemOutcome]) -> None:
@@ -243,7 +251,10 @@ def print_table(outcomes: Sequence[ItemOutcome]) -> None:
         if outcome.error is not None:
             rows.append((outcome.item, "", "ERROR " + describe_error(outcome.error)))
             continue
-        for index, (key, text) in enumerate(_flatten(json_value(outcome.value))):
+        lines = _flatten(json_value(outcome.value)) if outcome.value not in ({}, None) or not outcome.part_errors \
+            else []
+        lines += [(part, "REFUSED " + describe_error(error)) for part, error in outcome.part_errors]
+        for index, (key, text) in enumerate(lines):
             rows.append((outcome.item if index == 0 else "", key, text))
     widths = [max((len(r[i]) for r in rows), default=0) for i in range(2)]
     for item, key, text in rows:
@@ -275,10 +286,13 @@ def register(subparsers: Any) -> None:
                     f"{' '.join(NAMED_READS)} macro:500-505 param:6711 param:1815/1 param:1815/0.3 param:1850/all "
                     "diag:980-981/1 diag:308-309/all "
                     "pmc:D2204.word pmc:R100-R103 pmc:R100.3",
-        epilog="Exit codes: 0 every item read, 1 an item or the connection failed, 2 bad usage.")
+        epilog="A composite (program, loads, positions, timers ...) prints every part the CNC answered and names "
+               "each refused part with its return code. Exit codes: 0 every item and part read, 3 every item "
+               "answered but some parts were refused, 1 an item or the connection failed whole, 2 bad usage.")
     add_connection_arguments(parser)
     parser.add_argument("items", nargs="+", metavar="ITEM", help="what to read (see above)")
-    parser.add_argument("--json", action="store_true", help="one JSON object per item: item, value, error")
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON object per item: item, value, error, refused (part -> error)")
     parser.set_defaults(func=run)
 
 
@@ -319,11 +333,18 @@ def run(args: argparse.Namespace) -> int:
     plans, session = prepared
     outcomes = asyncio.run(read_all(session, plans))
     (print_json if args.json else print_table)(outcomes)
+    return report_failures(outcomes)
+
+
+def report_failures(outcomes: Sequence[ItemOutcome]) -> int:
+    """Name every refused part and failed item on stderr; the exit status: 1 when an item failed whole, 3 when
+    only parts were refused, 0 when everything was read."""
     for outcome in outcomes:
+        if outcome.error is not None:
+            print(f"focas-edge read: {outcome.item}: {describe_error(outcome.error)}", file=sys.stderr)
+            continue
         for part, error in outcome.part_errors:
             print(f"focas-edge read: {outcome.item}: {part}: {describe_error(error)} (left out)", file=sys.stderr)
-    failed = [o for o in outcomes if o.error is not None]
-    for outcome in failed:
-        assert outcome.error is not None
-        print(f"focas-edge read: {outcome.item}: {describe_error(outcome.error)}", file=sys.stderr)
-    return EXIT_FAILURE if failed else EXIT_OK
+    if any(o.error is not None for o in outcomes):
+        return EXIT_FAILURE
+    return EXIT_PARTIAL if any(o.part_errors for o in outcomes) else EXIT_OK

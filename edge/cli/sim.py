@@ -14,27 +14,44 @@ import asyncio
 import contextlib
 import signal
 import sys
+import textwrap
 from typing import Any
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
 
+EXIT_CODES = ("Exit codes: 0 stopped by Ctrl-C or SIGTERM, 1 a port could not be bound, 2 bad usage or a bad "
+              "scenario file.")
+PROFILES_AND_EXIT_CODES = "\0profiles and exit codes\0"  # expanded by _SimHelp when help is printed
+
+
+class _SimHelp(argparse.RawDescriptionHelpFormatter):
+    """Lists every simulator profile, one line each, when the help is printed: the profile table lives in the
+    simulator, which the CLI does not import just to parse its arguments."""
+
+    def add_text(self, text: str | None) -> None:
+        if text == PROFILES_AND_EXIT_CODES:
+            from edge.sim.profiles import profile_lines
+
+            text = "\n".join(["profiles (--profile):", *(f"  {line}" for line in profile_lines()), "",
+                              textwrap.fill(EXIT_CODES, width=self._width)])
+        super().add_text(text)
+
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "sim", help="run simulated CNCs (native FOCAS/Ethernet, optionally the packed surface)",
-        description="Run simulated FANUC CNCs on consecutive ports until Ctrl-C or SIGTERM. See docs/simulator.md "
-                    "for profiles, faults, the admin endpoint and scenario files.",
-        epilog="Exit codes: 0 stopped by Ctrl-C or SIGTERM, 1 a port could not be bound, 2 bad usage or a bad "
-               "scenario file.")
+        description=textwrap.fill("Run simulated FANUC CNCs on consecutive ports until Ctrl-C or SIGTERM. See "
+                                  "docs/simulator.md for profiles, faults, the admin endpoint and scenario files."),
+        epilog=PROFILES_AND_EXIT_CODES, formatter_class=_SimHelp)
     parser.add_argument("--machines", type=int, default=None, metavar="N", help="how many (default 1)")
     parser.add_argument("--port", type=int, default=None, metavar="PORT",
                         help="native FOCAS port of the first machine; the next ones follow (default 8193; "
                              "0 = any free port each)")
     parser.add_argument("--host", default=None, help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--profile", default="30i", metavar="NAME[,NAME...]",
-                        help="0i-F, 16i, 30i or 31i; a comma list is used in turn (default 30i)")
+                        help="a profile listed below; a comma list is used in turn (default 30i)")
     parser.add_argument("--packed-port", type=int, default=None, metavar="PORT",
                         help="also serve the packed surface, first machine on PORT")
     parser.add_argument("--admin-port", type=int, default=None, metavar="PORT",

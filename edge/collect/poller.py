@@ -105,6 +105,10 @@ class MachinePoller:
         self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
         self.last_error = ""  # the last connect, session or read error, for the status page
         self.last_progress = time.monotonic()
+        # Wall time of the last answered batch, by the set of groups it read (one dict store a tick; read_at
+        # turns it into per group times when the status page asks).
+        self._read_at_by_due: dict[AbstractSet[pl.Group], float] = {}
+        self._metric_groups: tuple[pl.MachinePlan | None, dict[str, pl.Group]] = (None, {})
         self._clock = ClockFeed(machine.id, machine.zone, machine.max_skew_s)
         self.clock = self._clock.tracker
         self._jitter_s = jitter_s
@@ -151,6 +155,24 @@ class MachinePoller:
     def last_values(self) -> dict[str, Sample]:
         """The last value published for each metric."""
         return self._changes.last_reported()
+
+    @property
+    def read_at(self) -> dict[pl.Group, float]:
+        """Wall time each poll group was last read by a batch that answered, this session (a value's age)."""
+        out: dict[pl.Group, float] = {}
+        for groups, when in self._read_at_by_due.items():
+            for group in groups:
+                if when > out.get(group, 0.0):
+                    out[group] = when
+        return out
+
+    def metric_groups(self) -> dict[str, pl.Group]:
+        """Metric name -> the poll group that reads it, for this session's plan (built once per plan)."""
+        plan = self._full_plan
+        if self._metric_groups[0] is not plan:
+            groups = {} if plan is None else {m.name: r.group for r in plan.reads for m in r.metrics}
+            self._metric_groups = (plan, groups)
+        return self._metric_groups[1]
 
     def cnc_time_ms(self) -> int:
         """Now, as the CNC's clock says (gateway time while the CNC clock is untrusted)."""
@@ -223,6 +245,7 @@ class MachinePoller:
     # ---- one session ---------------------------------------------------------------------------------
     async def _poll_session(self) -> None:
         static = await self._read_static()
+        self._read_at_by_due = {frozenset((pl.Group.STATIC,)): time.time()}
         paths = await self._paths.count(self.session)
         plan = pl.MachinePlan.build(self.machine.poll, static)
         for operation in self._unsupported(plan):
@@ -351,6 +374,7 @@ class MachinePoller:
         self.stats.record_cycle(mono_after - mono_before)
         mid_mono = (mono_before + mono_after) / 2
         mid_wall = (wall_before + wall_after) / 2
+        self._read_at_by_due[groups] = mid_wall
         clock_observed = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
         timestamp = self.clock.source_time_ms(mid_mono, mid_wall)
 

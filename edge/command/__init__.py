@@ -4,7 +4,8 @@ written through the machine's session, read back, answered and audited.
 What lives here: the daemon's entry point (service), request parsing and the write vocabulary (requests,
 dcmd), the policy (policy: enabled switch, allow-list with bounds, rate limit), CNC limits (limits,
 signedness), the per-machine write queue (executor), one target's read/write/verify (target_io), replies
-(results), the audit log (audit), reply codes (errors) and what it is told about the machines (settings).
+(results), the audit log (audit: size-bounded, rotated by the daemon; refusal_summary: one line for a refused
+command), reply codes (errors) and what it is told about the machines (settings).
 
 Rules:
 1. command may import edge.focas, edge.samples and its own modules; from edge.collect what the poll plan and

@@ -50,6 +50,8 @@ class ErrorCode(enum.StrEnum):
     UNAVAILABLE = "unavailable"  # no CNC session within the reconnect deadline
     TIMEOUT = "timeout"  # no answer, and the re-read could not tell whether the write took
     NOT_APPLIED = "not_applied"  # no answer; the re-read shows the write did not take
+    # the gateway itself failed while handling the command (a bug: its log has the traceback)
+    INTERNAL_ERROR = "internal_error"
 
 
 class CommandRefused(Exception):

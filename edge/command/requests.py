@@ -80,11 +80,25 @@ def _wrong(message: str) -> PydanticCustomError:
 
 
 def _number(what: str, raw: object) -> int | float:
+    """A finite number that converts to a float (bounds and policies compare floats; a 400-digit integer
+    would raise OverflowError there, far from the request that carried it)."""
     if isinstance(raw, bool) or not isinstance(raw, int | float):
-        raise _wrong(f"{what}: expected a number, got {json.dumps(raw)}")
+        raise _wrong(f"{what}: expected a number, got {_shown(raw)}")
     if isinstance(raw, float) and not math.isfinite(raw):
         raise _wrong(f"{what}: expected a finite number, got {raw}")
+    if isinstance(raw, int):
+        try:
+            float(raw)
+        except OverflowError:
+            raise _wrong(f"{what}: an integer of {len(str(abs(raw)))} digits is larger than any number a CNC "
+                         "holds") from None
     return raw
+
+
+def _shown(raw: object, limit: int = 80) -> str:
+    """A value as a refusal quotes it, cut short (the message goes to the reply and the audit line)."""
+    text = json.dumps(raw, default=str)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _integer(what: str, raw: object) -> int:
@@ -101,7 +115,7 @@ def _bit(what: str, raw: object) -> bool:
         return raw
     if isinstance(raw, int | float) and raw in (0, 1):
         return bool(raw)
-    raise _wrong(f"{what}: a bit takes true/false or 0/1, got {json.dumps(raw)}")
+    raise _wrong(f"{what}: a bit takes true/false or 0/1, got {_shown(raw)}")
 
 
 def macro_value(target: MacroTarget, raw: object) -> float:
@@ -225,12 +239,16 @@ class RequestItem:
 
 @dataclass(frozen=True, slots=True)
 class ParsedRequest:
+    """The items of a request; `refused`: the request as a whole is refused (too many writes), each item
+    answered with that refusal under its own id."""
+
     items: tuple[RequestItem, ...]
     is_list: bool
+    refused: CommandRefused | None = None
 
 
 def parse_request(payload: bytes, max_bytes: int) -> ParsedRequest:
-    """Bytes from the cmd topic -> items; a request-level problem raises CommandRefused."""
+    """Bytes from the cmd topic -> items; a request that cannot be read at all raises CommandRefused."""
     if len(payload) > max_bytes:
         raise CommandRefused(ErrorCode.PAYLOAD_TOO_LARGE,
                              f"request is {len(payload)} bytes; at most {max_bytes} are accepted")
@@ -238,15 +256,16 @@ def parse_request(payload: bytes, max_bytes: int) -> ParsedRequest:
         text = payload.decode("utf-8")
         check_depth(text)
         document = json.loads(text)
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError, a >4300-digit integer
         raise CommandRefused(ErrorCode.MALFORMED, f"expected a UTF-8 JSON object or list: {exc}") from None
     is_list = isinstance(document, list)
     elements = document if is_list else [document]
     if not elements:
         raise CommandRefused(ErrorCode.MALFORMED, "expected at least one write, got an empty list")
     if len(elements) > MAX_WRITES_PER_REQUEST:
-        raise CommandRefused(ErrorCode.MALFORMED,
-                             f"{len(elements)} writes in one request; at most {MAX_WRITES_PER_REQUEST}")
+        refusal = CommandRefused(ErrorCode.MALFORMED, f"{len(elements)} writes in one request; at most "
+                                 f"{MAX_WRITES_PER_REQUEST}; nothing was written")
+        return ParsedRequest(tuple(unread_item(i, e, refusal) for i, e in enumerate(elements)), is_list, refusal)
     return ParsedRequest(tuple(parse_item(i, e) for i, e in enumerate(elements)), is_list)
 
 
@@ -275,11 +294,6 @@ def check_depth(text: str) -> None:
 
 def parse_item(index: int, element: object) -> RequestItem:
     """One element of a request, validated; a refusal is kept with the id it carried."""
-    fields: dict[str, Any] = element if isinstance(element, dict) else {}
-    request_id = fields.get("id") if isinstance(fields.get("id"), str | int) else None
-    client = fields.get("client") if isinstance(fields.get("client"), str) else None
-    target_text = fields.get("target") if isinstance(fields.get("target"), str) else None
-    requested = fields.get("value")
     if not isinstance(element, dict):
         refused = CommandRefused(ErrorCode.MALFORMED,
                                  f"write {index}: expected an object with target and value, got "
@@ -288,8 +302,20 @@ def parse_item(index: int, element: object) -> RequestItem:
     try:
         request = WriteRequest.model_validate(element)
     except ValidationError as exc:
-        return RequestItem(index, request_id, client, None, target_text, requested, _refusal(index, exc))
+        return unread_item(index, element, _refusal(index, exc))
+    except (ArithmeticError, ValueError, TypeError, RecursionError) as exc:  # a check that itself failed
+        return unread_item(index, element, CommandRefused(
+            ErrorCode.WRONG_TYPE, f"write {index}: value could not be checked ({type(exc).__name__}: {exc})"))
     return RequestItem(index, request.id, request.client, request.op(), request.target, request.value)
+
+
+def unread_item(index: int, element: object, refusal: CommandRefused) -> RequestItem:
+    """A refused element, keeping what identifies it in the reply and the audit line (id, client, target)."""
+    fields: dict[str, Any] = element if isinstance(element, dict) else {}
+    request_id = fields.get("id") if isinstance(fields.get("id"), str | int) else None
+    client = fields.get("client") if isinstance(fields.get("client"), str) else None
+    target_text = fields.get("target") if isinstance(fields.get("target"), str) else None
+    return RequestItem(index, request_id, client, None, target_text, fields.get("value"), refusal)
 
 
 _CODES = {code.value: code for code in ErrorCode}

@@ -10,6 +10,7 @@ Reply (one object per write; a list request gets a list, in request order):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -57,12 +58,21 @@ def reply(request_id: object, target_text: str | None, result: WriteResult) -> d
         "ok": result.ok,
         "target": result.op.text if result.op is not None else target_text,
         "error": None if result.ok else {"code": str(result.code), "message": result.message},
-        "value_read_back": result.read_back,
+        "value_read_back": finite(result.read_back),
         "cnc_time": iso_ms(result.cnc_time_ms),
     }
     if result.note:
         body["note"] = result.note
     return body
+
+
+def finite(value: object) -> object:
+    """JSON has no NaN/Infinity (the publisher encodes strictly): a CNC's NaN float reads back as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    return value
 
 
 def request_error(code: ErrorCode, message: str) -> dict[str, Any]:

@@ -12,7 +12,7 @@ import asyncio
 import logging
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from itertools import groupby
 from typing import TYPE_CHECKING
 
@@ -23,28 +23,19 @@ from edge.command.errors import CommandRefused, ErrorCode
 from edge.command.executor import MachineWriteQueue
 from edge.command.limits import check_limits
 from edge.command.policy import RateLimiter, authorise
-from edge.command.requests import RequestItem, WriteOp, make_op, parse_request
+from edge.command.refusal_summary import summary_record
+from edge.command.requests import MAX_WRITES_PER_REQUEST, ParsedRequest, RequestItem, WriteOp, make_op, parse_request
 from edge.command.results import WriteResult, reply, request_error
 from edge.command.settings import CommandSettings, WritePolicy
 from edge.focas.model import SysInfo
 
 if TYPE_CHECKING:
     from edge.collect import MachinePoller
-    from edge.publish import CommandSource, Publisher
+    from edge.publish import CommandSource, DeviceCommands, Publisher
 
 log = logging.getLogger(__name__)
 
 Routed = tuple[MachineSettings, WriteOp]  # a write and the device (path) whose session carries it out
-
-
-@dataclass
-class _DcmdBatch:
-    """DCMD metrics of one message, collected until the loop has dispatched them all."""
-
-    device_id: str
-    source: CommandSource
-    metrics: list[tuple[str, object]] = field(default_factory=list)
-    done: asyncio.Event = field(default_factory=asyncio.Event)
 
 
 class CommandService:
@@ -54,10 +45,9 @@ class CommandService:
         self.settings = settings
         self.publisher = publisher
         self.pollers = pollers
-        self.audit = AuditLog(settings.state_dir)
+        self.audit = AuditLog(settings.state_dir, settings.audit_max_bytes, settings.audit_keep)
         self._rate = RateLimiter()
         self._queues: dict[str, MachineWriteQueue] = {}
-        self._dcmd: dict[tuple[str, str], _DcmdBatch] = {}
         self._counters: Counter[str] = Counter()
         self._closing = False
 
@@ -66,10 +56,12 @@ class CommandService:
         """Writes by outcome (ok, each refusal/error code) and ignored DCMD metrics, for node metrics."""
         out = {"requests": 0, "writes_ok": 0, "writes_failed": 0, "writes_refused": 0, "dcmd_ignored": 0}
         out.update(self._counters)
+        out["audit_lines_unwritten"] = self.audit.unwritten
         return out
 
     def reconfigure(self, settings: CommandSettings) -> None:
         self.settings = settings
+        self.audit.max_bytes, self.audit.keep = settings.audit_max_bytes, settings.audit_keep
 
     async def close(self) -> None:
         """Stop accepting commands; queued writes fail with shutting_down, the one in flight is cancelled."""
@@ -102,16 +94,13 @@ class CommandService:
         """A metric write refused before it became a request (unknown device or metric, read-only, wrong
         datatype, a number outside its datatype): one audit line and the outcome counters, like any other
         refusal."""
-        try:
-            error = ErrorCode(code)
-        except ValueError:  # not expected: the callers name ErrorCode values
-            error = ErrorCode.MALFORMED
-        refusal = CommandRefused(error, reason)
+        refusal = CommandRefused(_code(code), reason)
         item = RequestItem(0, None, client, None, metric, None, refusal)
         self._record(device_id, source, item, WriteResult.refused(None, refusal))
 
     # ---- JSON ----------------------------------------------------------------------------------------
     async def on_json_command(self, device_id: str, payload: bytes, source: CommandSource) -> None:
+        """One request from the cmd topic: exactly one reply and its audit line(s), whatever it holds."""
         try:
             parsed = parse_request(payload, self.settings.max_payload_bytes)
         except CommandRefused as refusal:
@@ -119,7 +108,7 @@ class CommandService:
             self._record(device_id, source, None, WriteResult.refused(None, refusal))
             await self.publisher.publish_json_reply(device_id, request_error(refusal.code, refusal.message), source)
             return
-        results = await self.execute(device_id, parsed.items, source)
+        results = await self._json_results(device_id, parsed, source)
         replies = [reply(item.id, item.target_text, result) for item, result in zip(parsed.items, results,
                                                                                      strict=True)]
         if parsed.is_list:
@@ -128,39 +117,82 @@ class CommandService:
         else:
             await self.publisher.publish_json_reply(device_id, replies[0], source)
 
+    async def _json_results(self, device_id: str, parsed: ParsedRequest, source: CommandSource) -> list[WriteResult]:
+        if parsed.refused is not None:  # too many writes: each id answered, one audit line
+            self._counters["requests"] += 1
+            return self._refuse_command(device_id, source, parsed.items, parsed.refused)
+        try:
+            return await self.execute(device_id, parsed.items, source)
+        except Exception as exc:  # a bug must not cost the reply and the audit line
+            return self._internal_error(device_id, source, parsed.items, exc)
+
     def _refuse_all(self, device_id: str, items: Sequence[RequestItem], source: CommandSource,
                     refusal: CommandRefused) -> list[WriteResult]:
         """One refusal for every item (each keeps its id and target in the reply), audited."""
         results = [WriteResult.refused(item.op, refusal) for item in items]
-        for item, result in zip(items, results, strict=True):
-            self._record(device_id, source, item, result)
+        self._audit_results(device_id, source, items, results)
+        return results
+
+    def _refuse_command(self, device_id: str, source: CommandSource, items: Sequence[RequestItem],
+                        refusal: CommandRefused) -> list[WriteResult]:
+        """A command refused as a whole (over a cap): every item answered with `refusal`, one audit line."""
+        results = [WriteResult.refused(item.op, refusal) for item in items]
+        self._audit_refused(device_id, source, items, results)
+        return results
+
+    def _internal_error(self, device_id: str, source: CommandSource, items: Sequence[RequestItem],
+                        exc: Exception) -> list[WriteResult]:
+        """The gateway failed handling a command (a bug): logged with its traceback, answered and audited."""
+        log.exception("write command failed inside the gateway machine=%s topic=%s", device_id, source.topic)
+        message = (f"the gateway failed handling this command ({type(exc).__name__}: {exc}); see its log. A write "
+                   "already queued may have reached the CNC: read the target before retrying")
+        results = [WriteResult(item.op, False, ErrorCode.INTERNAL_ERROR, message) for item in items]
+        self._audit_refused(device_id, source, items, results)
         return results
 
     # ---- Sparkplug DCMD --------------------------------------------------------------------------------
-    async def on_device_command(self, device_id: str, metric_name: str, value: object,
-                                source: CommandSource) -> None:
-        """One DCMD metric. The metrics of one message are gathered (the publisher hands them over in one
-        loop turn) and run as one request, in order, with adjacent PMC elements merged."""
-        key = (device_id, source.topic)
-        batch = self._dcmd.get(key)
-        if batch is None:
-            batch = self._dcmd[key] = _DcmdBatch(device_id, source)
-            asyncio.get_running_loop().call_soon(self._start_dcmd, key)
-        batch.metrics.append((metric_name, value))
-        await batch.done.wait()
+    async def on_device_commands(self, commands: DeviceCommands, source: CommandSource) -> None:
+        """One DCMD message, one request: capped like a JSON request (bytes, writes), all-or-nothing (a metric
+        the publisher refused means none is written), in order, adjacent PMC elements merged. Sparkplug has no
+        reply: the outcome is the audit (one line when refused), the counters and DDATA."""
+        device_id = commands.device_id
+        metrics = [(name, value) for name, value in commands.writes]
+        try:
+            over = self._dcmd_over_limit(commands)
+            if over is not None:
+                self._counters["requests"] += 1
+                items = [RequestItem(i, None, None, None, name, value, over) for i, (name, value) in enumerate(metrics)]
+                items += [RequestItem(len(items) + i, None, None, None, r.metric, None, over)
+                          for i, r in enumerate(commands.refused)]
+                items = items or [RequestItem(0, None, None, None, None, None, over)]
+                self._refuse_command(device_id, source, items, over)
+                return
+            items = self._metric_items(device_id, metrics, source, None)
+            if commands.refused:
+                self._counters["requests"] += 1
+                refused = [RequestItem(len(items) + i, None, None, None, r.metric, None,
+                                       CommandRefused(_code(r.code), r.reason)) for i, r in enumerate(commands.refused)]
+                everything = refused + items
+                results = [WriteResult.refused(item.op, item.refused) if item.refused is not None
+                           else WriteResult.skipped(item.op, 0) for item in everything]
+                self._audit_refused(device_id, source, everything, results)
+                return
+            await self.execute(device_id, items, source)
+        except Exception as exc:  # a bug must not cost the audit line
+            self._internal_error(device_id, source, [RequestItem(0, None, None, None, None, None)], exc)
 
-    def on_device_command_refused(self, device_id: str, metric: str | None, code: str, reason: str,
-                                  source: CommandSource) -> None:
-        """A DCMD metric the publisher refused: audited and counted (`refuse_metric`)."""
-        self.refuse_metric(device_id, metric, code, reason, source)
-
-    def _start_dcmd(self, key: tuple[str, str]) -> None:
-        batch = self._dcmd.pop(key)
-        task = asyncio.get_running_loop().create_task(self._run_dcmd(batch))
-        task.add_done_callback(lambda _t: batch.done.set())
-
-    async def _run_dcmd(self, batch: _DcmdBatch) -> None:
-        await self.write_metrics(batch.device_id, batch.metrics, batch.source)
+    def _dcmd_over_limit(self, commands: DeviceCommands) -> CommandRefused | None:
+        """The JSON caps for a DCMD: at most max_payload_bytes and MAX_WRITES_PER_REQUEST metrics."""
+        if commands.metric_count == 0:
+            return CommandRefused(ErrorCode.MALFORMED, "a DCMD without metrics; nothing to write")
+        limit = self.settings.max_payload_bytes
+        if commands.payload_bytes > limit:
+            return CommandRefused(ErrorCode.PAYLOAD_TOO_LARGE, f"DCMD is {commands.payload_bytes} bytes; at most "
+                                  f"{limit} are accepted (writes.max_payload_bytes); nothing was written")
+        if commands.metric_count > MAX_WRITES_PER_REQUEST:
+            return CommandRefused(ErrorCode.MALFORMED, f"{commands.metric_count} metrics in one DCMD; at most "
+                                  f"{MAX_WRITES_PER_REQUEST}; nothing was written")
+        return None
 
     def _metric_items(self, device_id: str, metrics: Sequence[tuple[str, object]], source: CommandSource,
                       client: str | None) -> list[RequestItem]:
@@ -211,8 +243,7 @@ class CommandService:
             results = await self._queue_and_wait(machine, policy, list(checked))
         else:
             results = checked
-        for item, result in zip(items, results, strict=True):
-            self._record(machine.id, source, item, result)
+        self._audit_results(machine.id, source, items, results)
         return results
 
     def _check(self, machine: MachineSettings, policy: WritePolicy,
@@ -284,8 +315,24 @@ class CommandService:
             queue = self._queues[machine_id] = MachineWriteQueue(machine_id, self.pollers, deadline)
         return queue
 
-    def _record(self, machine_id: str, source: CommandSource, item: RequestItem | None,
-                result: WriteResult) -> None:
+    def _audit_results(self, machine_id: str, source: CommandSource, items: Sequence[RequestItem],
+                       results: Sequence[WriteResult]) -> None:
+        """A line per write; but a DCMD none of whose writes was sent is one line (it can hold 64 metrics)."""
+        unsent = all(result.code in REFUSALS for result in results)
+        if source.format == "sparkplug" and unsent and len(items) > 1:
+            self._audit_refused(machine_id, source, items, results)
+            return
+        for item, result in zip(items, results, strict=True):
+            self._record(machine_id, source, item, result)
+
+    def _audit_refused(self, machine_id: str, source: CommandSource, items: Sequence[RequestItem],
+                       results: Sequence[WriteResult]) -> None:
+        """Every write counted, the command audited in one line (edge.command.refusal_summary)."""
+        for result in results:
+            self._count(result)
+        self.audit.write(summary_record(machine_id, source.format, source.topic, items, results))
+
+    def _count(self, result: WriteResult) -> None:
         if result.ok:
             self._counters["writes_ok"] += 1
         elif result.code is not None and result.code.value in REFUSALS:
@@ -293,6 +340,10 @@ class CommandService:
         else:
             self._counters["writes_failed"] += 1
         self._counters[f"outcome/{result.outcome}"] += 1
+
+    def _record(self, machine_id: str, source: CommandSource, item: RequestItem | None,
+                result: WriteResult) -> None:
+        self._count(result)
         self.audit.write(AuditRecord(
             time=utc_now(), machine=machine_id, source=source.format, topic=source.topic,
             client_id=item.client if item is not None else None,
@@ -331,3 +382,11 @@ REFUSALS = frozenset({ErrorCode.MALFORMED, ErrorCode.PAYLOAD_TOO_LARGE, ErrorCod
                       ErrorCode.NOT_ALLOWED, ErrorCode.WRONG_TYPE, ErrorCode.OUT_OF_BOUNDS,
                       ErrorCode.RATE_LIMITED, ErrorCode.QUEUE_FULL, ErrorCode.SKIPPED,
                       ErrorCode.SHUTTING_DOWN})
+
+
+def _code(text: str) -> ErrorCode:
+    """The reply code the publisher named for a refused metric (malformed if it named none we know)."""
+    try:
+        return ErrorCode(text)
+    except ValueError:
+        return ErrorCode.MALFORMED

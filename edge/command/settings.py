@@ -54,3 +54,5 @@ class CommandSettings:
     max_payload_bytes: int
     machines: Mapping[str, MachineSettings]  # by device id: path routing, and the plan before a poller has one
     policies: Mapping[str, WritePolicy]  # by device id, the same keys
+    audit_max_bytes: int = 10 * 1024 * 1024  # write-audit.jsonl is rotated past this size ...
+    audit_keep: int = 5  # ... keeping this many older files (.1 .. .keep)

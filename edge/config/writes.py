@@ -5,7 +5,7 @@ the global `enabled` is the master switch, off by default).
 
 from __future__ import annotations
 
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import ByteSize, Field, ValidationInfo, field_validator
 
 from edge.config.fields import Duration, _Model
 from edge.focas.targets import TargetError, TargetPattern
@@ -47,12 +47,20 @@ class RateLimit(_Model):
     per_s: Duration = 60.0
 
 
+class AuditConfig(_Model):
+    """`<state_dir>/write-audit.jsonl` is rotated by the daemon past max_bytes, keeping `keep` older files."""
+
+    max_bytes: ByteSize = Field(default=ByteSize(10 * 1024 * 1024), ge=64 * 1024)
+    keep: int = Field(default=5, ge=1, le=100)
+
+
 class WritesConfig(_Model):
     enabled: bool = False
     allow: list[AllowRule] = Field(default_factory=list)
     rate_limit: RateLimit = Field(default_factory=RateLimit)
     reconnect_deadline_s: Duration = 10.0
-    max_payload_bytes: int = Field(default=4096, ge=64, le=1_048_576)
+    max_payload_bytes: int = Field(default=4096, ge=64, le=1_048_576)  # a JSON request or a DCMD
+    audit: AuditConfig = Field(default_factory=AuditConfig)
 
 
 class MachineWrites(_Model):

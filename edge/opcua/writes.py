@@ -53,6 +53,8 @@ STATUS_BY_CODE: dict[str, str] = {
     "unavailable": "BadCommunicationError",
     "timeout": "BadTimeout",
     "not_applied": "BadTimeout",
+    # the gateway failed handling the write (a bug, logged with its traceback)
+    "internal_error": "BadInternalError",
 }
 UNKNOWN_CODE_STATUS = "BadInternalError"
 

@@ -13,6 +13,7 @@ What lives here (one job per module):
   node, ddata, payload, aliases, bdseq, primary_host   Sparkplug, sans-IO: births, seq, metric encoding, STATE
   json_topics        JSON topic names and bodies, sans-IO
   mqtt, mqtt_wire, credentials, connect_failure        the paho connection driven by the asyncio loop
+  broker_trouble     a broker outage said once, summarised a minute, and its end; the state the status shows
   forwarding, replay_dedupe, spool, spool_disk         store and forward bookkeeping, the SQLite spool
   state_store        small JSON documents in state_dir (bdSeq, aliases)
   settings           PublishSettings: what this layer needs from the config, as a plain dataclass
@@ -32,17 +33,19 @@ from edge.publish import payload
 from edge.publish.credentials import apply_credentials
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import DroppingSpool, Spool
-from edge.publish.inbound import CommandSource
+from edge.publish.inbound import CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.publisher import Publisher
 from edge.publish.settings import PublishSettings
 from edge.publish.spool import open_spool
 
 __all__ = [
     "CommandSource",
+    "DeviceCommands",
     "DroppingSpool",
     "ForwardingPolicy",
     "PublishSettings",
     "Publisher",
+    "RefusedMetric",
     "Spool",
     "apply_credentials",
     "open_spool",

@@ -2,7 +2,9 @@
 
 Its Will is the retained gateway "offline", so a Sparkplug reconnect never disturbs JSON subscribers. The
 last state of every machine is kept here and stated again (retained) on every connect, since a broker
-restart may have lost retained messages. Live state goes out at QoS 0 through the link (edge.publish.link);
+restart may have lost retained messages. When a machine's session drops, its retained state is restated
+with quality STALE (Sparkplug's DDEATH says the same to Sparkplug hosts); its next session states it GOOD.
+Live state goes out at QoS 0 through the link (edge.publish.link);
 what cannot go live is held and replayed as `history` / `events` messages.
 """
 
@@ -19,7 +21,7 @@ from edge.publish.inbound import CommandHandlers, CommandSource
 from edge.publish.json_topics import JsonTopics, encode
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will, response_properties
-from edge.publish.node import Outgoing
+from edge.publish.node import Outgoing, now_ms
 from edge.publish.replay import Replayer
 from edge.publish.settings import PublishSettings
 from edge.publish.tasks import BackgroundTasks, awaited
@@ -43,6 +45,7 @@ class JsonSession:
         self.link = DeliveryLink("json", writer, counters, policy, tasks)
         self.replay = Replayer(self.link, self, writer.spool, counters, tasks)
         self._online: dict[str, bool] = {}
+        self._offline_since: dict[str, int] = {}  # epoch ms each offline machine's session dropped
         self._state: dict[str, dict[str, Sample]] = {}
 
     # -- lifecycle -----------------------------------------------------------------------------------
@@ -68,6 +71,7 @@ class JsonSession:
             for device_id, online in self._online.items():
                 if online:
                     self._send(conn, self.topics.machine_status(device_id, False))
+                    self._send_stale(conn, device_id, now_ms())
             last = self.topics.gateway_offline()
         await self.link.confirm_then_disconnect(conn, last, with_will=False)
 
@@ -75,6 +79,7 @@ class JsonSession:
 
     def device_online(self, device_id: str, specs: Sequence[MetricSpec], samples: Sequence[Sample]) -> None:
         self._online[device_id] = True
+        self._offline_since.pop(device_id, None)
         state = self._state.setdefault(device_id, {})
         names = {spec.name for spec in specs}
         for name in [n for n in state if n not in names]:
@@ -108,9 +113,17 @@ class JsonSession:
 
     def device_offline(self, device_id: str) -> None:
         self._online[device_id] = False
+        self._offline_since[device_id] = since = now_ms()
         conn = self.link.conn
         if conn is not None and conn.connected:
             self._send(conn, self.topics.machine_status(device_id, False))
+            self._send_stale(conn, device_id, since)
+
+    def _send_stale(self, conn: MqttConnection, device_id: str, since_ms: int) -> None:
+        """Restate a machine's retained values with quality STALE (its session is down since `since_ms`)."""
+        topics = self.topics
+        for s in self._state.get(device_id, {}).values():
+            self._send(conn, topics.state(device_id, s, since_ms))
 
     def reply(self, conn: MqttConnection, device_id: str, payload: dict[str, Any] | list[dict[str, Any]],
               source: CommandSource) -> None:
@@ -139,6 +152,9 @@ class JsonSession:
         self._send(conn, topics.gateway_online())
         for device_id, online in self._online.items():
             self._send(conn, topics.machine_status(device_id, online))
+            if not online:
+                self._send_stale(conn, device_id, self._offline_since.get(device_id) or now_ms())
+                continue
             for s in self._state.get(device_id, {}).values():
                 self._send(conn, topics.state(device_id, s))
         self._tasks.spawn(self._subscribe(conn))

@@ -2,7 +2,8 @@
 
     <prefix>/_gateway/online               retained "online" / "offline" (the Will of the JSON connection)
     <prefix>/<machine>/online              retained "online" / "offline"
-    <prefix>/<machine>/state/<metric name> retained {"value", "quality", "timestamp", "ts", "type"}
+    <prefix>/<machine>/state/<metric name> retained {"value", "quality", "timestamp", "ts", "type"}; while the
+                                           machine's session is down: quality "STALE" and "stale_since"
     <prefix>/<machine>/events/alarm        not retained, one message per event (replayed ones: "historical")
     <prefix>/<machine>/history/<metric>    not retained: values replayed from the store-and-forward spool
     <prefix>/<machine>/cmd                 subscribed: write requests (parsed by the command layer)
@@ -95,9 +96,15 @@ class JsonTopics:
         check_id("machine id", machine)
         return Outgoing(f"{self.prefix}/{machine}/online", ONLINE if online else OFFLINE, qos=1, retain=True)
 
-    def state(self, machine: str, sample: Sample) -> Outgoing:
-        return Outgoing(f"{self.prefix}/{machine}/state/{topic_level(sample.name)}",
-                        self._numbered(sample_document(sample), None), qos=0, retain=True)
+    def state(self, machine: str, sample: Sample, stale_since_ms: int | None = None) -> Outgoing:
+        """The retained current value; with `stale_since_ms` (the machine's session is down since then) the
+        last value is restated with quality STALE, so a late subscriber never reads GOOD from a dead machine."""
+        doc = sample_document(sample)
+        if stale_since_ms is not None:
+            doc["quality"] = Quality.STALE.name
+            doc["stale_since"] = iso_utc(stale_since_ms)
+        return Outgoing(f"{self.prefix}/{machine}/state/{topic_level(sample.name)}", self._numbered(doc, None),
+                        qos=0, retain=True)
 
     def event(self, machine: str, sample: Sample, spool_id: int | None = None) -> Outgoing:
         doc = sample_document(sample)

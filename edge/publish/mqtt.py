@@ -39,6 +39,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
+from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -114,6 +115,7 @@ class MqttConnection:
                         "paho_mqtt=%s problem=%s", mqtt_wire.PAHO_VERSION, mqtt_wire.PROBLEM)
         self.connected = False  # CONNACK accepted and not lost since
         self.connects = 0
+        self.trouble = BrokerTrouble(settings.host, settings.port, client_id, log)  # outages, summarised
 
     # -- lifecycle -----------------------------------------------------------------------------------
 
@@ -214,10 +216,8 @@ class MqttConnection:
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            # A broker that is down is an outage (INFO); a TLS failure is a configuration to fix (WARNING).
             tls = connect_failure.is_tls_failure(exc)
-            self._log_attempt_failed(logging.WARNING if tls else logging.INFO,
-                                     "TLS handshake failed" if tls else "connect failed", str(exc))
+            self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
         finally:
             self._connecting = False
@@ -229,11 +229,10 @@ class MqttConnection:
         self._watch(loop, client, sock)
         return True
 
-    def _log_attempt_failed(self, level: int, what: str, cause: str) -> None:
+    def _attempt_failed(self, what: str, cause: BaseException | str, reason: str | None = None) -> None:
+        """WARNING when an outage starts or its reason changes, then summarised (edge.publish.broker_trouble)."""
         self._attempt_reported = True
-        extra = connect_failure.hint(cause, self._settings)
-        log.log(level, "MQTT %s host=%s port=%s client_id=%s attempt=%d error=%s%s", what, self._settings.host,
-                self._settings.port, self._client_id, self._attempt + 1, cause, f" hint={extra}" if extra else "")
+        self.trouble.failed(what, cause, connect_failure.hint(str(cause), self._settings), reason)
 
     def _watch(self, loop: asyncio.AbstractEventLoop, client: paho.Client, sock: Any) -> None:
         # paho leaves Nagle on: a reply or DATA sent while an earlier packet is unacknowledged would wait
@@ -414,9 +413,8 @@ class MqttConnection:
     def _paho_connect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                       properties: Properties | None) -> None:
         if reason.is_failure:
-            self._attempt_reported = True
-            log.warning("MQTT connection refused host=%s port=%s client_id=%s reason=%s",
-                        self._settings.host, self._settings.port, self._client_id, reason)
+            self._attempt_failed("connection refused", str(reason),
+                                 NOT_AUTHORISED if reason.value in (0x04, 0x05, 0x86, 0x87, 0x8C) else None)
             return  # paho closes the socket; the supervisor retries after the backoff delay
         client.on_log = None  # formatting every paho log line costs on the publish path
         self._attempt = 0
@@ -474,16 +472,20 @@ class MqttConnection:
         self.connects += 1
         log.info("MQTT connected host=%s port=%s client_id=%s protocol=%s", self._settings.host,
                  self._settings.port, self._client_id, self._settings.protocol)
+        recovered = self.trouble.up()
+        if recovered:
+            log.info("%s", recovered)
         self._on_connected(tag)
 
     def _loop_disconnected(self, reason: str) -> None:
         if not self.connected and not self._attempt_reported and self._client is not None:
             # Closed between CONNECT and CONNACK: a broker refusing at the TLS layer (no client
             # certificate) looks like this; say why, as a refused password is said.
-            self._log_attempt_failed(logging.WARNING, "connection closed before CONNACK",
-                                     self._attempt_error or reason)
+            self._attempt_failed("connection closed before CONNACK", self._attempt_error or reason)
         if self.connected:
             stopping = self._client is None  # stop() clears it first: a disconnect we asked for
+            if not stopping:
+                self.trouble.lost(reason)
             log.log(logging.INFO if stopping else logging.WARNING,
                     "MQTT %s host=%s port=%s client_id=%s reason=%s", "disconnected" if stopping else "connection lost",
                     self._settings.host, self._settings.port, self._client_id, reason)
@@ -492,6 +494,7 @@ class MqttConnection:
     def _set_disconnected(self) -> None:
         was = self.connected
         self.connected = False
+        self.trouble.down()
         for fut in self._pending.values():
             if not fut.done():
                 fut.set_exception(MqttUnavailable("connection lost"))

@@ -465,6 +465,9 @@ class SparkplugNode:
         if parts[2] == "NCMD" and len(parts) == 4:
             return [self._node_command(m) for m in p.metrics]
         if parts[2] == "DCMD" and len(parts) == 5:
+            if not p.metrics:  # still a command someone sent: refused and audited, not dropped unseen
+                return [CommandIgnored(f"{topic}: a DCMD without metrics", unknown=False, device_id=parts[4],
+                                       code="malformed")]
             return [self._device_command(parts[4], m) for m in p.metrics]
         expected = "expected NCMD/<edge> or DCMD/<edge>/<device>"
         return [CommandIgnored(f"topic {topic!r}: {expected}", unknown=True)]

@@ -22,6 +22,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from edge.publish.broker_trouble import BrokerState
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import DroppingSpool, ReplaySpool, Spool, SpoolWriter
 from edge.publish.inbound import (
@@ -29,7 +30,6 @@ from edge.publish.inbound import (
     CommandSource,
     DeviceCommandHandler,
     JsonCommandHandler,
-    RefusedCommandHandler,
 )
 from edge.publish.json_session import JsonSession
 from edge.publish.link import DeliveryLink
@@ -101,14 +101,6 @@ class Publisher:
         self._handlers.json = handler
 
     @property
-    def on_device_command_refused(self) -> RefusedCommandHandler | None:
-        return self._handlers.refused
-
-    @on_device_command_refused.setter
-    def on_device_command_refused(self, handler: RefusedCommandHandler | None) -> None:
-        self._handlers.refused = handler
-
-    @property
     def node_metrics_source(self) -> Callable[[], Sequence[Sample]] | None:
         """The gateway's metrics as of now, read again for every NBIRTH."""
         return self._spb.node_metrics_source
@@ -157,6 +149,10 @@ class Publisher:
     def connected(self) -> bool:
         conns = self._connections()
         return bool(conns) and all(c.connected for c in conns)
+
+    def broker_states(self) -> list[tuple[str, BrokerState]]:
+        """Each connection's broker session as (format, state): connected or down since when, the last error."""
+        return [(link.fmt, link.conn.trouble.state()) for link in self._links() if link.conn is not None]
 
     async def stop(self) -> None:
         """DDEATH every online device, NDEATH, DISCONNECT (MQTT 5: reason 0x04); JSON: offline, retained."""

@@ -25,7 +25,7 @@ from edge.publish.aliases import AliasMap
 from edge.publish.bdseq import BdSeqCounter
 from edge.publish.forwarding import ForwardingPolicy, HeldBatch
 from edge.publish.holding import SpoolWriter
-from edge.publish.inbound import CommandHandlers, CommandSource
+from edge.publish.inbound import CommandHandlers, CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will
 from edge.publish.node import CommandIgnored, DeviceCommand, Outgoing, RebirthRequested, SparkplugNode
@@ -205,18 +205,25 @@ class SparkplugSession:
         if self.host is not None and msg.topic == self.host.topic:
             self._state_message(msg)
             return
+        writes: list[tuple[str, object]] = []
+        refused: list[RefusedMetric] = []
+        device_id: str | None = None
         for event in self.node.parse_command(msg.topic, msg.payload):
             if isinstance(event, RebirthRequested):
                 self._rebirth_requested()
             elif isinstance(event, DeviceCommand):
-                self._dispatch_device_command(event, msg)
+                device_id = event.device_id
+                writes.append((event.metric_name, event.value))
             elif isinstance(event, CommandIgnored):
                 self._counters["unknown_commands" if event.unknown else "rejected_commands"] += 1
-                log.warning("Sparkplug command ignored topic=%s reason=%s", msg.topic, event.reason)
-                refused = self._handlers.refused
-                if refused is not None and event.device_id is not None and event.code is not None:
-                    refused(event.device_id, event.metric, event.code, event.reason,
-                            CommandSource("sparkplug", msg.topic))
+                if event.device_id is not None and event.code is not None:
+                    device_id = event.device_id
+                    refused.append(RefusedMetric(event.metric, event.code, event.reason))
+                else:
+                    log.warning("Sparkplug command ignored topic=%s reason=%s", msg.topic, event.reason)
+        if device_id is not None:
+            self._dispatch_device_commands(DeviceCommands(device_id, tuple(writes), tuple(refused),
+                                                          len(msg.payload)), msg)
 
     def _state_message(self, msg: InboundMessage) -> None:
         assert self.host is not None
@@ -278,15 +285,19 @@ class SparkplugSession:
             self._rebirth_handle.cancel()
             self._rebirth_handle = None
 
-    def _dispatch_device_command(self, event: DeviceCommand, msg: InboundMessage) -> None:
+    def _dispatch_device_commands(self, commands: DeviceCommands, msg: InboundMessage) -> None:
+        """One DCMD to the command layer, whole; its refused metrics are logged in one line, not one each."""
+        if commands.refused:
+            first = commands.refused[0]
+            log.warning("DCMD metrics refused topic=%s refused=%d of=%d first=%s reason=%s", msg.topic,
+                        len(commands.refused), commands.metric_count, first.code, first.reason)
         handler = self._handlers.device
         if handler is None:
-            self._counters["rejected_commands"] += 1
-            log.warning("DCMD ignored: no command handler device=%s metric=%s", event.device_id,
-                        event.metric_name)
+            self._counters["rejected_commands"] += len(commands.writes)
+            log.warning("DCMD ignored: no command handler device=%s metrics=%d", commands.device_id,
+                        commands.metric_count)
             return
-        source = CommandSource("sparkplug", msg.topic)
-        self._tasks.spawn(awaited(handler(event.device_id, event.metric_name, event.value, source)))
+        self._tasks.spawn(awaited(handler(commands, CommandSource("sparkplug", msg.topic))))
 
     # -- what the replay asks (edge.publish.replay.ReplayTarget) -------------------------------------
 

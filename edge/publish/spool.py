@@ -419,12 +419,40 @@ class UnopenedSpool:
 
 
 def open_spool(state_dir: Path, max_bytes: int, max_age_s: float) -> DiskSpool | UnopenedSpool:
-    """The daemon's spool: `spool.sqlite` in the state directory (or, if it cannot be opened, one that
-    counts what it cannot keep -- logged as an ERROR naming the file and the cause)."""
+    """The daemon's spool: `spool.sqlite` in the state directory. A file that is not a database (or a
+    malformed one) is moved aside, kept for inspection, and a new spool opened: otherwise every restart would
+    meet the same file and the next broker outage would lose its samples. A spool that cannot be opened at
+    all (no byte left on the disk) is one that counts what it cannot keep; both logged as an ERROR naming the
+    file and the cause."""
     path = Path(state_dir) / FILE_NAME
     try:
         return DiskSpool(path, max_bytes=max_bytes, max_age_s=max_age_s)
-    except (sqlite3.Error, OSError) as exc:
-        log.error("spool cannot be opened, samples that cannot be published are dropped (counted) until a "
-                  "restart path=%s error=%s", path, exc)
-        return UnopenedSpool(path, exc)
+    except sqlite3.DatabaseError as exc:
+        if isinstance(exc, sqlite3.OperationalError):  # cannot open or write (full disk, permissions)
+            return _unopened(path, exc)
+        aside = _move_aside(path)
+        log.error("spool file is corrupt (%s): moved to %s, its rows are not replayed; a new spool is started "
+                  "path=%s", exc, aside, path)
+        try:
+            return DiskSpool(path, max_bytes=max_bytes, max_age_s=max_age_s)
+        except (sqlite3.Error, OSError) as again:
+            return _unopened(path, again)
+    except OSError as exc:
+        return _unopened(path, exc)
+
+
+def _unopened(path: Path, exc: Exception) -> UnopenedSpool:
+    log.error("spool cannot be opened, samples that cannot be published are dropped (counted) until a "
+              "restart path=%s error=%s", path, exc)
+    return UnopenedSpool(path, exc)
+
+
+def _move_aside(path: Path) -> Path:
+    """Renames the database and its WAL/shared-memory files to `<name>.corrupt-<UTC time>[-wal|-shm]`."""
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    aside = path.with_name(f"{path.name}.corrupt-{stamp}")
+    for suffix in ("", "-wal", "-shm"):
+        source = path.with_name(path.name + suffix)
+        if source.exists():
+            source.rename(aside.with_name(aside.name + suffix))
+    return aside

@@ -12,6 +12,8 @@ What lives here:
     daemon_view   the read-only view of a running daemon that the status endpoint and the live view share
     status_http   /healthz, /metrics (Prometheus), /status.json and the status page
     status_page   status.json's document and the page rendered from it
+    status_gateway  the gateway's identity and broker session: the page's block, status.json, systemd STATUS=
+    value_freshness a value's age and whether it can still be called GOOD (status page and status.json)
     sdnotify      READY/RELOADING/STOPPING/WATCHDOG/STATUS to systemd
     gc_tuning     the garbage collector's settings for a long-running daemon
     logformat     text or JSON log lines (every subcommand uses it)
@@ -28,4 +30,4 @@ Rules:
 """
 
 __all__ = ["daemon", "daemon_view", "gc_tuning", "logformat", "opcua_output", "outputs", "sdnotify", "settings",
-           "state_lock", "status_http", "status_page"]
+           "state_lock", "status_gateway", "status_http", "status_page", "value_freshness"]

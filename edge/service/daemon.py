@@ -30,11 +30,13 @@ from edge.service.outputs import Outputs
 from edge.service.sdnotify import SystemdNotifier
 from edge.service.settings import command_settings, machine_settings, opcua_settings, publish_settings
 from edge.service.state_lock import StateDirLock
+from edge.service.status_gateway import systemd_status
 from edge.service.status_http import StatusServer
 
 log = logging.getLogger(__name__)
 
 NODE_METRICS_PERIOD_S = 5.0
+SYSTEMD_STATUS_PERIOD_S = 1.0
 
 
 class Daemon:
@@ -60,9 +62,8 @@ class Daemon:
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
         self.outputs = Outputs(self.publisher, [self.opcua] if self.opcua is not None else [])
-        self.publisher.on_device_command = self.commands.on_device_command
+        self.publisher.on_device_command = self.commands.on_device_commands
         self.publisher.on_json_command = self.commands.on_json_command
-        self.publisher.on_device_command_refused = self.commands.on_device_command_refused
         self.publisher.node_metrics_source = self.node_metrics
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stop = asyncio.Event()
@@ -115,6 +116,8 @@ class Daemon:
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
         background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
+        if self.notifier.enabled:
+            background.append(asyncio.create_task(self._systemd_status_loop(), name="systemd-status"))
         interval = self.notifier.watchdog_interval()
         if interval:
             background.append(asyncio.create_task(self._watchdog_loop(interval), name="watchdog"))
@@ -304,6 +307,20 @@ class Daemon:
         values += [(f"Writes/{name}", int(writes.get(key, 0)), MetricType.INT64)
                    for name, key in (("Ok", "writes_ok"), ("Failed", "writes_failed"), ("Refused", "writes_refused"))]
         return [Sample(name, value, kind, now) for name, value, kind in values]
+
+    @property
+    def uptime_s(self) -> float:
+        return time.monotonic() - self._started
+
+    async def _systemd_status_loop(self) -> None:
+        """`systemctl status` shows machines connected and the broker session (down since, last error)."""
+        shown = ""
+        while True:
+            await asyncio.sleep(SYSTEMD_STATUS_PERIOD_S)
+            line = systemd_status(self)
+            if line != shown:
+                shown = line
+                self.notifier.status(line)
 
     async def _node_metrics_loop(self) -> None:
         while True:

@@ -114,8 +114,10 @@ def command_settings(config: Config) -> CommandSettings:
         for device in devices:
             machines[device.id] = _machine_settings(config, device, ids)
             policies[device.id] = write_policy(config, device)
+    audit = config.writes.audit
     return CommandSettings(state_dir=config.resolved_state_dir, max_payload_bytes=config.writes.max_payload_bytes,
-                           machines=machines, policies=policies)
+                           machines=machines, policies=policies, audit_max_bytes=int(audit.max_bytes),
+                           audit_keep=audit.keep)
 
 
 def write_policy(config: Config, machine: MachineConfig) -> WritePolicy:

@@ -27,6 +27,7 @@ from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 from edge import __version__
 from edge.collect import CYCLE_BUCKETS
 from edge.service.daemon_view import DaemonView, spool_depth
+from edge.service.status_gateway import broker_document, broker_text
 from edge.service.status_page import RateMeter, page_json, render_page, status_document
 
 log = logging.getLogger(__name__)
@@ -61,7 +62,7 @@ def assess_health(daemon: DaemonView, healthy_share: float) -> Health:
     connected = sum(1 for poller in daemon.pollers.values() if poller.online)
     reasons = []
     if not broker:
-        reasons.append("the MQTT broker session is down")
+        reasons.append(f"the MQTT broker session is down ({broker_text(broker_document(daemon))})")
     share = connected / total if total else 1.0
     if share < healthy_share:
         down = sorted(mid for mid, poller in daemon.pollers.items() if not poller.online)

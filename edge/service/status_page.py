@@ -16,11 +16,12 @@ import html
 import json
 import time
 from collections.abc import Mapping
-from datetime import UTC, datetime
 from typing import Any
 
 from edge import __version__
 from edge.service.daemon_view import DaemonView, spool_depth
+from edge.service.status_gateway import GATEWAY_SCRIPT, broker_document, gateway_identity, render_gateway_block
+from edge.service.value_freshness import freshness, local_iso
 
 LIVE_VALUE_PREFIXES = ("Status/Run", "Status/Mode", "Program/Number", "Spindle/1/Speed", "Feed/Actual",
                        "Counters/Parts")
@@ -28,7 +29,8 @@ REFRESH_MS = 1000
 
 
 def _iso(epoch_s: float) -> str:
-    return datetime.fromtimestamp(epoch_s, UTC).isoformat(timespec="seconds")
+    """Local time with its UTC offset: the person reading the page stands in the plant."""
+    return local_iso(epoch_s)
 
 
 def value_text(value: object) -> str:
@@ -60,7 +62,33 @@ class RateMeter:
         return self._rate.get(machine_id)
 
 
-def _machine(machine_id: str, poller: Any, meter: RateMeter, now: float) -> dict[str, Any]:
+def value_entries(poller: Any, values: Mapping[str, Any], names: list[str], wall_now: float) -> list[dict[str, Any]]:
+    """Each value with its quality and age (edge.service.value_freshness): never GOOD from a dead session."""
+    groups = poller.metric_groups()
+    read_at = poller.read_at
+    plan = poller.plan
+    periods = plan.periods if plan is not None else {}
+    online = bool(poller.online)
+    out = []
+    for name in names:
+        sample = values[name]
+        group = groups.get(name)
+        fresh = freshness(sample.quality, online=online, last_read=read_at.get(group),
+                          changed_at=sample.timestamp_ms / 1000, period_s=periods.get(group), now=wall_now)
+        out.append({"name": name, "value": value_text(sample.value), "quality": fresh.quality,
+                    "age_s": round(fresh.age_s, 1), "last_good": _iso(fresh.last_good)})
+    return out
+
+
+def value_text_line(value: Mapping[str, Any]) -> str:
+    """`name = value`, and for a value that is not GOOD: its quality and since when it is not."""
+    text = f"{value['name']} = {value['value']}"
+    if value["quality"] == "GOOD":
+        return text
+    return text + f" [{value['quality']} since {value['last_good']}, {value['age_s']:.0f} s ago]"
+
+
+def _machine(machine_id: str, poller: Any, meter: RateMeter, now: float, wall_now: float) -> dict[str, Any]:
     sysinfo = getattr(poller.session, "sysinfo", None)
     values = poller.last_values()
     shown = [name for prefix in LIVE_VALUE_PREFIXES for name in sorted(values) if name.startswith(prefix)]
@@ -78,8 +106,7 @@ def _machine(machine_id: str, poller: Any, meter: RateMeter, now: float) -> dict
         "dropped": poller.dropped,
         "alarms": [{"number": a.number, "type": a.type, "axis": a.axis, "message": a.message}
                    for a in poller.active_alarms],
-        "values": [{"name": name, "value": value_text(values[name].value),
-                    "quality": values[name].quality.name} for name in shown],
+        "values": value_entries(poller, values, shown, wall_now),
     }
 
 
@@ -95,14 +122,16 @@ def failing_text(failing: Any) -> str:
 
 def status_document(daemon: DaemonView, meter: RateMeter) -> dict[str, Any]:
     """What the page shows, as JSON-ready data."""
-    now = time.monotonic()
+    now, wall_now = time.monotonic(), time.time()
     pollers: Mapping[str, Any] = dict(daemon.pollers)
     config = getattr(daemon, "config", None)
-    machines = [_machine(mid, poller, meter, now) for mid, poller in sorted(pollers.items())]
+    machines = [_machine(mid, poller, meter, now, wall_now) for mid, poller in sorted(pollers.items())]
     return {
         "version": __version__,
-        "generated_at": _iso(time.time()),
+        "generated_at": _iso(wall_now),
         "gateway": {
+            "identity": gateway_identity(daemon, wall_now),
+            "broker": broker_document(daemon),
             "broker_connected": bool(daemon.publisher.connected),
             "spool_depth": spool_depth(daemon),
             "writes_enabled": bool(config.writes.enabled) if config is not None else False,
@@ -121,11 +150,11 @@ h1{font-size:1.3em;margin:0 0 .3em}table{border-collapse:collapse;width:100%;bac
 th,td{border:1px solid #ddd;padding:.35em .5em;text-align:left;vertical-align:top}th{background:#f0f0f0}
 .up{color:#0a7d2c;font-weight:600}.down{color:#b3261e;font-weight:600}.muted{color:#777}
 .alarm{color:#b3261e}dl{display:grid;grid-template-columns:max-content auto;gap:.2em 1em;margin:.5em 0 1em}
-dt{color:#555}dd{margin:0}small{color:#777}
+dt{color:#555}dd{margin:0}small{color:#777}.stale{color:#999;font-style:italic}
 """
 
 # Redraws the page from /status.json every second. Text goes in with textContent only (no HTML from data).
-_SCRIPT = """
+_SCRIPT = GATEWAY_SCRIPT + """
 const cell = (row, text, cls) => { const td = row.insertCell(); td.textContent = text;
   if (cls) td.className = cls; return td; };
 const rate = (m) => (m.achieved_hz === null ? "measuring" : m.achieved_hz.toFixed(2)) + " / "
@@ -147,8 +176,15 @@ function draw(doc) {
     cell(row, (m.connected ? "connected" : "offline") + " since " + m.since, m.connected ? "up" : "down");
     cell(row, m.series || "?");
     cell(row, rate(m));
-    cell(row, m.values.map(v => v.name + " = " + v.value + (v.quality === "GOOD" ? "" : " [" + v.quality + "]"))
-      .join("\\n") || "(none)").style.whiteSpace = "pre-line";
+    const values = cell(row, "");
+    for (const v of m.values) {
+      const line = document.createElement("div");
+      line.textContent = v.name + " = " + v.value + (v.quality === "GOOD" ? "" : " [" + v.quality + " since "
+        + v.last_good + ", " + Math.round(v.age_s) + " s ago]");
+      if (v.quality !== "GOOD") line.className = "stale";
+      values.appendChild(line);
+    }
+    if (!m.values.length) values.textContent = "(none)";
     cell(row, m.alarms.map(a => a.number + " " + a.message).join("\\n") || "none",
       m.alarms.length ? "alarm" : "muted").style.whiteSpace = "pre-line";
     cell(row, m.dropped.join(", ") || "none", m.dropped.length ? "" : "muted");
@@ -157,6 +193,7 @@ function draw(doc) {
     cell(row, failing.concat(m.last_error ? [m.last_error] : []).join("\\n") || "none",
       failing.length ? "down" : (m.last_error ? "" : "muted")).style.whiteSpace = "pre-line";
   }
+  drawGateway(doc);
   updates += 1;
   document.body.dataset.updates = updates;
   document.getElementById("updated").textContent = "live, updated " + doc.generated_at + " (" + updates + ")";
@@ -176,8 +213,8 @@ _COLUMNS = ("machine", "CNC session", "series", "status reads achieved / planned
 def _row(machine: Mapping[str, Any]) -> str:
     e = html.escape
     rate = "measuring" if machine["achieved_hz"] is None else f"{machine['achieved_hz']:.2f}"
-    values = "<br>".join(e(f"{v['name']} = {v['value']}" + ("" if v["quality"] == "GOOD" else f" [{v['quality']}]"))
-                         for v in machine["values"]) or "(none)"
+    values = "".join(("<div>" if v["quality"] == "GOOD" else '<div class="stale">') + e(value_text_line(v))
+                     + "</div>" for v in machine["values"]) or "(none)"
     alarms = "<br>".join(e(f"{a['number']} {a['message']}") for a in machine["alarms"])
     state = "connected" if machine["connected"] else "offline"
     cells = [
@@ -219,6 +256,7 @@ def render_page(doc: Mapping[str, Any]) -> str:
 <dt>writes</dt><dd id="writes">{"on" if g["writes_enabled"] else "off"}</dd>
 <dt>machines</dt><dd id="count">{g["machines_connected"]} of {g["machines"]} connected</dd>
 </dl>
+{render_gateway_block(g["identity"], g["broker"])}
 <table><thead><tr>{"".join(f"<th>{c}</th>" for c in _COLUMNS)}</tr></thead>
 <tbody id="machines">
 {rows}

@@ -41,6 +41,7 @@ class Profile:
     pmc_float_types: bool = True  # PMC data types 4/5 (float/double) exist on 30i-B/0i-F only
     timer_little_endian: bool = False  # a 31i-B sends cnc_rdtimer's payload little-endian (LMX 5f0a528)
     paths: int = 1  # CNC paths (a twin-turret lathe has 2); requests for a path beyond answer EW_PATH
+    summary: str = ""  # one line for `focas-edge sim --help`: what real control this stands for
 
     @property
     def wide_records(self) -> bool:
@@ -76,6 +77,7 @@ PROFILES: dict[str, Profile] = {
         axis_names=("X", "Y", "Z", "A"),
         spindle_names=("S1",),
         response_version=4,
+        summary="0i-F machining centre: 4 axes, 1 spindle, 32-axis series, version-4 responses",
     ),
     "16i": Profile(
         name="16i",
@@ -85,6 +87,7 @@ PROFILES: dict[str, Profile] = {
         response_version=2,
         pmc_sizes=dict(PMC_SIZES_16I),
         pmc_float_types=False,
+        summary="16i-B machining centre: 4 axes, 1 spindle, narrow (8-axis) records, no float PMC types",
     ),
     "30i": Profile(
         name="30i",
@@ -92,6 +95,7 @@ PROFILES: dict[str, Profile] = {
         axis_names=("X", "Y", "Z", "A", "C"),
         spindle_names=("S1", "S2"),
         response_version=4,
+        summary="30i-B machining centre: 5 axes, 2 spindles, version-4 responses",
     ),
     "31i": Profile(
         name="31i",
@@ -100,11 +104,19 @@ PROFILES: dict[str, Profile] = {
         spindle_names=("S1", "S2"),
         response_version=3,
         timer_little_endian=True,
+        summary="31i-B lathe: 3 axes, 2 spindles, little-endian timers (as a real 31i-B answers)",
     ),
 }
 # A twin-turret lathe: a 31i whose second path runs its own program.
-PROFILES["31i-2p"] = replace(PROFILES["31i"], name="31i-2p", paths=2)
+PROFILES["31i-2p"] = replace(PROFILES["31i"], name="31i-2p", paths=2,
+                             summary="31i-B twin-turret lathe: the 31i with 2 paths, each its own program")
 PROFILE_ALIASES = {"0i": "0i-F", "0if": "0i-F", "16": "16i", "30": "30i", "31": "31i", "31i-b": "31i"}
+
+
+def profile_lines() -> list[str]:
+    """One line per profile (name and what it stands for), for help texts."""
+    width = max(len(name) for name in PROFILES)
+    return [f"{name:<{width}}  {profile.summary}" for name, profile in PROFILES.items()]
 
 
 def get_profile(name: str) -> Profile:

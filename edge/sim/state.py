@@ -105,7 +105,7 @@ class MachineState:
         self._pmc = PmcMemory(self._profile, self._writes)
         self._params = Parameters(self._profile, self._writes, start_parts)
         self._alarms = Alarms(self._clock)
-        self._program = Program(self._profile, self._cycle)
+        self._program = Program(self._profile, self._cycle, path)
         self._motion = Motion(self._profile, self._cycle, seed)
         self.param_write_enabled = False
         # A test hook: this macro reads as the CNC's own clock at the moment it answers (clock_macro_value),

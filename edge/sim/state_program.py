@@ -65,9 +65,10 @@ class CycleSpec:
 class Program:
     """The program side of one machine (path); reads only the cycle spec, the profile and `t`."""
 
-    def __init__(self, profile: Profile, cycle: CycleSpec) -> None:
+    def __init__(self, profile: Profile, cycle: CycleSpec, path: int = 1) -> None:
         self.profile = profile
         self.cycle = cycle
+        self.path = path  # the CNC path this program runs on: its memory folder is PATH<n>
 
     def program_numbers(self) -> ProgramNumbers:
         number = self.cycle.program_number
@@ -91,7 +92,7 @@ class Program:
         return ExecProgram(number, f"O{number:04d}")
 
     def main_program_path(self) -> str:
-        return f"//CNC_MEM/USER/PATH1/O{self.cycle.program_number:04d}"
+        return f"//CNC_MEM/USER/PATH{self.path}/O{self.cycle.program_number:04d}"
 
     def operator_messages(self, t: float) -> list[OperatorMessage]:
         cutting, _ = self.cycle.phase_at(t)

@@ -34,7 +34,8 @@ class Received:
 class Observer:
     """Subscribes to `topics` (QoS 1), reconnecting and resubscribing when the broker restarts."""
 
-    def __init__(self, broker: Mosquitto, topics: tuple[str, ...] = ("spBv1.0/#", "focas/#")) -> None:
+    def __init__(self, broker: Mosquitto, topics: tuple[str, ...] = ("spBv1.0/#", "focas/#"),
+                 username: str | None = None, password: str | None = None) -> None:
         self.topics = topics
         self.broker = broker
         self.messages: list[Received] = []
@@ -44,6 +45,8 @@ class Observer:
         self.client.on_connect = self._on_connect
         self.client.on_subscribe = lambda *a: self._subscribed.set()
         self.client.on_message = self._on_message
+        if username is not None:
+            self.client.username_pw_set(username, password)
         self.client.reconnect_delay_set(0.05, 0.2)  # type: ignore[arg-type]
         self.client.connect_async(broker.host, broker.port, keepalive=5)
         self.client.loop_start()

@@ -17,6 +17,7 @@ import pytest
 
 from edge.cli import main
 from edge.cli.named_reads import NAMED_READS, TIMER_KINDS
+from edge.focas.items import TOOL_OFFSET_KINDS
 from edge.focas.targets import READ_NAMES
 from edge.sim.native_server import NativeServer
 from edge.sim.packed_server import PackedServer, start_packed_server
@@ -71,7 +72,7 @@ def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, s
 
 def json_lines(out: str) -> dict[str, dict[str, Any]]:
     rows = [json.loads(line) for line in out.splitlines() if line.strip()]
-    assert all(set(row) == {"item", "value", "error"} for row in rows)
+    assert all({"item", "value", "error"} <= set(row) <= {"item", "value", "error", "refused"} for row in rows)
     return {row["item"]: row for row in rows}
 
 
@@ -167,13 +168,68 @@ def test_positions_degrade_per_kind(sim: Sim, capsys: pytest.CaptureFixture[str]
     """One position kind answered EW_NOOPT (as a real EDM answers distance-to-go): the other kinds are
     printed, the refused one is named on stderr, the item does not fail."""
     code, out, err = read_with_ew(sim, capsys, {"positions/7": 6}, "positions")
-    assert code == 0, err
+    assert code == 3, err
     row = json_lines(out)["positions"]
-    assert row["error"] is None
+    assert row["error"] is None and set(row["refused"]) == {"distance"}
     axes = row["value"]
     assert set(axes) == set(sim.state.axis_names())
     assert all(set(kinds) == {"absolute", "machine", "relative"} for kinds in axes.values())
     assert "positions: distance" in err and "EW_NOOPT" in err
+
+
+# Each composite with parts refused as real controls refuse them: (item, EW faults, refused parts, value keys).
+PARTIAL_READS = [
+    # a 16i-W EDM: the program number answers, the executing program's name and its path are EW_FUNC
+    ("program", {"exec_program_name": 1, "main_program_path": 1}, {"name", "path"}, {"running", "main", "sequence"}),
+    # a 31i lathe: servo loads answer, spindle names are EW_FUNC
+    ("loads", {"spindle_names": 1}, {"spindle"}, {"servo"}),
+    ("loads", {"servo_meter": 6}, {"servo"}, {"spindle"}),
+    ("timers", {"read_timer/1": 1, "read_timer/4": 6}, {"operating", "free"}, {"power_on", "cutting", "cycle"}),
+    ("speeds", {"actual_feed": 1}, {"feed"}, {"spindle"}),
+    ("alarms", {"alarm_messages": 1}, {"active"}, {"status"}),
+    ("axes", {"controlled_axes": 1}, {"controlled"}, {"names"}),
+    ("tool_offsets", {"tool_offsets/1/3": 6}, {"radius_wear"}, None),
+]
+
+
+@pytest.mark.parametrize(("item", "ew", "refused", "kept"), PARTIAL_READS,
+                         ids=[f"{row[0]}-{'+'.join(sorted(row[2]))}" for row in PARTIAL_READS])
+def test_composite_read_prints_every_part_answered_and_names_each_refused(
+        sim: Sim, capsys: pytest.CaptureFixture[str], item: str, ew: dict[str, int], refused: set[str],
+        kept: set[str] | None) -> None:
+    """Exit 3 (some parts refused); the value holds every part the CNC answered; `refused` and stderr name each
+    refused part with its return code."""
+    code, out, err = read_with_ew(sim, capsys, ew, item)
+    assert code == 3, err
+    row = json_lines(out)[item]
+    assert row["error"] is None
+    assert set(row["refused"]) == refused
+    assert {error["code"] for error in row["refused"].values()} <= {"EW_FUNC", "EW_NOOPT"}
+    if kept is not None:
+        assert set(row["value"]) == kept
+    else:  # tool offsets: every offset number keeps the kinds that answered
+        assert row["value"] and all(set(kinds) == set(TOOL_OFFSET_KINDS) - refused for kinds in row["value"].values())
+    for part in refused:
+        assert f"{item}: {part}: EW_" in err
+
+
+def test_composite_read_with_every_part_refused_fails_whole(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = read_with_ew(sim, capsys, {"servo_meter": 1, "spindle_load": 1}, "loads", "macro:500")
+    assert code == 1, err
+    rows = json_lines(out)
+    assert rows["loads"]["error"]["code"] == "EW_FUNC" and set(rows["loads"]["refused"]) == {"servo", "spindle"}
+    assert rows["macro:500"]["error"] is None
+
+
+def test_refused_parts_are_rows_of_the_table(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:
+    sim.native.faults.update({"ew": {"exec_program_name": 1}})
+    try:
+        code, out, _ = run_cli(capsys, "read", sim.address, "program", "macro:500")
+    finally:
+        sim.native.faults.clear()
+    assert code == 3
+    assert any(line.split()[:3] == ["name", "REFUSED", "EW_FUNC"] for line in out.splitlines())
+    assert any(line.split()[:1] == ["main"] for line in out.splitlines())
 
 
 def test_all_axes_reads_are_keyed_by_axis_name(sim: Sim, capsys: pytest.CaptureFixture[str]) -> None:

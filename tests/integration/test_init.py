@@ -110,3 +110,24 @@ def test_init_writes_the_bundled_units_out_too_running_this_installation(
                 f"# {here} is under a home directory: read-only, not hidden\n", "") == shipped
         assert main(args) == EXIT_USAGE, "the units are not overwritten without --force"
         assert "use --force" in capsys.readouterr().err
+
+
+def test_init_acl_writes_the_broker_acl_beside_the_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet([MachineSpec(profile="30i")], base_port=0)) as fleet:
+        code = main(["init", f"127.0.0.1:{fleet[0].port}", "--names", "m1", "--node", "gw-7", "--group", "site",
+                     "-o", str(out), "--acl", "--acl-users", "line2-edge:mes-line2"])
+    assert code == EXIT_OK, capsys.readouterr().err
+    assert "mosquitto.acl" in capsys.readouterr().err
+    acl = (tmp_path / "mosquitto.acl").read_text().splitlines()
+    gateway = acl[acl.index("user line2-edge") + 1:acl.index("user mes-line2")]
+    mes = acl[acl.index("user mes-line2") + 1:]
+    assert "topic write spBv1.0/site/DDATA/gw-7/+" in gateway and "topic read spBv1.0/site/DCMD/gw-7/+" in gateway
+    assert not any("CMD" in line or line.endswith("/cmd") for line in gateway if line.startswith("topic write"))
+    commands = [line for line in mes if line.startswith("topic write")]
+    assert commands == ["topic write spBv1.0/site/NCMD/gw-7", "topic write spBv1.0/site/DCMD/gw-7/+",
+                        "topic write focas/+/cmd"]
+    # The file exists now: a second run without --force refuses to overwrite it.
+    assert main(["init", "127.0.0.1:1", "-o", str(tmp_path / "other.yaml"), "--acl",
+                 str(tmp_path / "mosquitto.acl")]) == EXIT_USAGE
+    assert "exists" in capsys.readouterr().err

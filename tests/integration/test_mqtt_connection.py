@@ -6,6 +6,7 @@ import asyncio
 import logging
 import os
 import random
+import re
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -220,3 +221,74 @@ async def test_wildcard_topic_still_refused_by_paho(mosquitto: Mosquitto, tmp_pa
             conn.publish("bad/+/topic", b"x")
     finally:
         await conn.stop()
+
+
+def broker_warnings(caplog: pytest.LogCaptureFixture, address: str) -> list[str]:
+    return [line for line in mqtt_warnings(caplog) if f"broker={address}" in line]
+
+
+def attempts_logged(caplog: pytest.LogCaptureFixture, what: str) -> int:
+    """Every attempt leaves a record (DEBUG once the outage has been said)."""
+    return len([r for r in caplog.records if r.name == "edge.publish.mqtt" and what in r.getMessage()])
+
+
+@pytest.mark.parametrize("protocol", ["3.1.1", "5"])
+async def test_a_refused_login_is_one_warning_naming_the_broker_and_the_reason(
+        auth_broker: Mosquitto, tmp_path: Path, caplog: pytest.LogCaptureFixture, protocol: str) -> None:
+    """Not one line per attempt (every 0.2 s here): one WARNING, then a summary a minute (unit-tested)."""
+    caplog.set_level(logging.DEBUG, logger="edge.publish.mqtt")
+    pub = Publisher(settings(auth_broker, tmp_path, username="edge", password="wrong", protocol=protocol,
+                             formats=frozenset({"sparkplug"})))
+    await pub.start()
+    try:
+        await async_wait_for(lambda: attempts_logged(caplog, "connection refused") >= 6, 20,
+                             message="six refused logins")
+        address = f"{auth_broker.host}:{auth_broker.port}"
+        warnings = broker_warnings(caplog, address)
+        assert len(warnings) == 1, warnings
+        assert "reason=not authorised" in warnings[0] and "Not authorized" in warnings[0], warnings[0]
+        (_, state), = pub.broker_states()
+        assert not state.connected and state.reason == "not authorised" and state.failed_attempts >= 6
+    finally:
+        await pub.stop()
+
+
+async def test_an_unresolvable_broker_name_is_one_warning_saying_so(tmp_path: Path,
+                                                                    caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.DEBUG, logger="edge.publish.mqtt")
+    s = PublishSettings(host="no-such-broker.invalid", port=1883, formats=frozenset({"json"}), state_dir=tmp_path,
+                        reconnect_min_s=0.05, reconnect_max_s=0.2)
+    pub = Publisher(s)
+    await pub.start()
+    try:
+        await async_wait_for(lambda: attempts_logged(caplog, "connect failed") >= 4, 20, message="four attempts")
+        warnings = broker_warnings(caplog, "no-such-broker.invalid:1883")
+        assert len(warnings) == 1 and "reason=unresolvable" in warnings[0], warnings
+    finally:
+        await pub.stop()
+
+
+async def test_a_broker_that_goes_away_is_said_twice_then_once_more_when_it_is_back(
+        mosquitto: Mosquitto, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Lost (one WARNING), refused on reconnect (one WARNING with the reason), quiet meanwhile, back (one line
+    with how long it was down)."""
+    caplog.set_level(logging.DEBUG, logger="edge.publish.mqtt")
+    pub = Publisher(settings(mosquitto, tmp_path, formats=frozenset({"json"})))
+    await pub.start()
+    try:
+        assert await pub.wait_ready()
+        mosquitto.stop()
+        await async_wait_for(lambda: attempts_logged(caplog, "connect failed") >= 8, 20, message="eight attempts")
+        warnings = mqtt_warnings(caplog)
+        assert len(warnings) == 2, warnings
+        assert "connection lost" in warnings[0] and "reason=refused" in warnings[1], warnings
+        (_, state), = pub.broker_states()
+        assert not state.connected and state.failed_attempts >= 8 and "Connection refused" in state.last_error
+        mosquitto.start()
+        await async_wait_for(lambda: pub.connected, 15, message="reconnected")
+        back = [r.getMessage() for r in caplog.records if "available again" in r.getMessage()]
+        assert len(back) == 1 and f"broker={mosquitto.host}:{mosquitto.port}" in back[0], back
+        assert re.search(r"down_for=\d+s failed_attempts=\d+", back[0]), back[0]
+        assert len(mqtt_warnings(caplog)) == 2
+    finally:
+        await pub.stop()

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from edge.publish import CommandSource, Publisher, PublishSettings
+from edge.publish import CommandSource, DeviceCommands, Publisher, PublishSettings
 from edge.publish import payload as pl
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType, Quality, Sample
@@ -249,8 +249,8 @@ async def test_dcmd_by_name_and_alias_reaches_callback_unknown_counted(
     pub = make_publisher()
     received: list[tuple[str, str, object, CommandSource]] = []
 
-    async def on_command(device: str, name: str, value: object, source: CommandSource) -> None:
-        received.append((device, name, value, source))
+    async def on_command(commands: DeviceCommands, source: CommandSource) -> None:
+        received.extend((commands.device_id, name, value, source) for name, value in commands.writes)
 
     pub.on_device_command = on_command
     await pub.device_online("cnc1", SPECS, samples())

@@ -81,11 +81,12 @@ async def test_status_json_and_the_server_rendered_page(mosquitto: Mosquitto, tm
         status, headers, body = await http_get(running.http_port, "/status.json")
         assert status == 200 and headers["content-type"] == "application/json"
         doc = json.loads(body)
-        assert doc["gateway"] == {"broker_connected": True, "spool_depth": 0, "writes_enabled": False,
-                                  "machines": 2, "machines_connected": 2}
+        gateway = {k: v for k, v in doc["gateway"].items() if k not in ("identity", "broker")}
+        assert gateway == {"broker_connected": True, "spool_depth": 0, "writes_enabled": False,
+                           "machines": 2, "machines_connected": 2}
         m1, m2 = doc["machines"]
         assert (m1["id"], m1["connected"], m1["series"], m1["planned_hz"]) == ("m1", True, "30i-BM", 4.0)
-        assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", m1["since"])
+        assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d", m1["since"])  # local, offset
         assert {"number": 1001, "type": m1["alarms"][0]["type"], "axis": 0, "message": "SPINDLE OVERHEAT"} \
             in m1["alarms"]
         assert any(v["name"] == "Status/Run" for v in m1["values"])

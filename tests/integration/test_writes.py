@@ -393,3 +393,31 @@ async def test_every_command_gets_an_answer_and_an_audit_line_and_nothing_wraps(
         assert run.daemon.commands.counters["outcome/wrong_type"] >= 4
         await asyncio.sleep(0)
         assert fleet[0].state.write_log == []
+
+
+async def test_one_dcmd_is_one_command_capped_like_json_and_audited_once_when_refused(
+        mosquitto: Mosquitto, start: Callable[..., Any], tmp_path: Path) -> None:
+    """A 580 kB DCMD of 5,000 unknown names used to write 5,000 audit lines (2.3 MB)."""
+    async with Fleet([MachineSpec(profile="30i")], base_port=0) as fleet:
+        run = await start(config_text(mosquitto, tmp_path, native("m1", fleet[0].port)), "m1")
+        aliases = run.aliases("m1")
+        audit_file = tmp_path / "write-audit.jsonl"
+        audited, size = len(audit_lines(tmp_path)), audit_file.stat().st_size if audit_file.exists() else 0
+
+        flood = [Payload.Metric(name=f"Unknown/Metric{n:04d}/{'x' * 90}", double_value=1.0) for n in range(5000)]
+        assert len(Payload(metrics=flood).SerializeToString()) > 500_000
+        await run.dcmd("m1", flood)
+        # 65 writable metrics in ~1 kB: under the byte cap (2048 here), over the 64-write cap.
+        await run.dcmd("m1", [Payload.Metric(alias=aliases[f"PMC/R{100 + n % 40}"], int_value=1) for n in range(65)])
+        # One unknown name among good ones: the whole DCMD is refused, nothing of it written.
+        await run.dcmd("m1", [Payload.Metric(alias=aliases["Macro/500"], double_value=3.0),
+                              Payload.Metric(name="No/Such", double_value=1.0)])
+        await run.dcmd("m1", [Payload.Metric(alias=aliases["Macro/501"], double_value=4.0)])
+        await async_wait_for(lambda: len(audit_lines(tmp_path)) >= audited + 4, message="four audit lines")
+        lines = audit_lines(tmp_path)[audited:]
+        assert [a["outcome"] for a in lines] == ["payload_too_large", "malformed", "unknown_metric", "ok"], lines
+        assert "5000 writes in this command, none sent" in lines[0]["message"]
+        assert "65 metrics in one DCMD; at most 64" in lines[1]["message"]
+        assert lines[2]["target"] == "No/Such" and "2 writes in this command, none sent" in lines[2]["message"]
+        assert audit_file.stat().st_size - size < 4000, "four lines, not megabytes"
+        assert writes(fleet[0], "macro:") == [("macro:501", 4.0)] and writes(fleet[0], "pmc:") == []

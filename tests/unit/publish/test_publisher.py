@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.command.errors import ErrorCode
-from edge.publish import CommandSource, Publisher
+from edge.publish import CommandSource, DeviceCommands, Publisher
 from edge.publish.mqtt import InboundMessage
 from edge.publish.settings import PublishSettings
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
@@ -29,27 +29,29 @@ WRITABLE = {s.name: s for s in SPECS if s.writable}
 NCMD = "spBv1.0/plant/NCMD/gw"
 DCMD = "spBv1.0/plant/DCMD/gw/m1"
 REFUSED: list[tuple[Any, ...]] = []  # DCMD metrics the publisher refused in the last run_messages
+DCMDS: list[DeviceCommands] = []  # what the handler was handed, one per DCMD message
 
 
 def run_messages(tmp: Path, messages: list[InboundMessage], fmt: str) -> tuple[list[tuple[Any, ...]], Publisher]:
     """Feed inbound messages to a publisher (not connected) with a declared device; the handler calls."""
     calls: list[tuple[Any, ...]] = []
     REFUSED.clear()
+    DCMDS.clear()
 
     async def body() -> Publisher:
         settings = PublishSettings(state_dir=tmp, group_id="plant", edge_node_id="gw", json_prefix="focas")
         pub = Publisher(settings)
 
-        async def device_command(device: str, name: str, value: object, source: CommandSource) -> None:
-            calls.append((device, name, value))
+        async def device_command(commands: DeviceCommands, source: CommandSource) -> None:
+            DCMDS.append(commands)
+            calls.extend((commands.device_id, name, value) for name, value in commands.writes)
+            REFUSED.extend((commands.device_id, r.metric, r.code, r.reason) for r in commands.refused)
 
         async def json_command(machine: str, payload: bytes, source: CommandSource) -> None:
             calls.append((machine, payload))
 
         pub.on_device_command = device_command
         pub.on_json_command = json_command
-        pub.on_device_command_refused = lambda device, metric, code, reason, source: REFUSED.append(
-            (device, metric, code, reason))
         await pub.device_online("m1", SPECS, [])
         for msg in messages:
             (pub._spb.handle_message if fmt == "sparkplug" else pub._json.handle_message)(msg)
@@ -113,7 +115,10 @@ def test_fuzz_structured_sparkplug_commands_reach_the_handler_only_when_valid(
     codes = {code.value for code in ErrorCode}
     assert all(code in codes and reason for _, _, code, reason in REFUSED), REFUSED
     if topic in (DCMD, "spBv1.0/plant/DCMD/gw/m9"):
-        assert len(calls) + len(REFUSED) == len(ms)
+        assert len(calls) + len(REFUSED) == max(len(ms), 1)  # a DCMD without metrics is refused too
+        # One DCMD is one hand-off (the command layer caps and audits it as one command), with its size.
+        assert len(DCMDS) == 1
+        assert all(d.payload_bytes == len(payload_of(ms)) for d in DCMDS)
     else:
         assert not REFUSED
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import signal
 import subprocess
@@ -14,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.publish.forwarding import ForwardingPolicy, HeldBatch, Outbox
-from edge.publish.spool import DiskSpool, decode_samples, encode_samples
+from edge.publish.spool import DiskSpool, decode_samples, encode_samples, open_spool
 from edge.samples import MetricType, Quality, Sample
 
 
@@ -178,3 +179,22 @@ def test_outbox_confirms_up_to_the_mark_and_gives_back_the_rest() -> None:
 def test_forwarding_policy_validates() -> None:
     with pytest.raises(ValueError, match="positive"):
         ForwardingPolicy(probe_timeout_s=0)
+
+
+@pytest.mark.parametrize("content", [b"\x00garbage" * 4096, b"SQLite format 3\x00" + bytes(range(256)) * 20],
+                         ids=["not-a-database", "malformed"])
+def test_a_corrupt_spool_file_is_moved_aside_and_a_new_spool_keeps_samples(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, content: bytes) -> None:
+    """Without this every restart met the same file and spooled nothing: the next outage lost its samples."""
+    (tmp_path / "spool.sqlite").write_bytes(content)
+    with caplog.at_level(logging.ERROR, logger="edge.publish.spool"):
+        spool = open_spool(tmp_path, 16 * 1024 * 1024, 3600.0)
+    try:
+        assert isinstance(spool, DiskSpool)
+        kept = [p for p in tmp_path.iterdir() if p.name.startswith("spool.sqlite.corrupt-")]
+        assert [p.read_bytes() for p in kept] == [content]
+        assert "spool file is corrupt" in caplog.text and kept[0].name in caplog.text
+        spool.hold("sparkplug", "m1", "data", [Sample("Macro/500", 1.5, MetricType.DOUBLE, 1_700_000_000_000)])
+        assert spool.pending("sparkplug") == 1
+    finally:
+        spool.close()

@@ -1,0 +1,165 @@
+"""Broker trouble said once, then summarised: what an MQTT connection's outage looks like in the log.
+
+A broker that is down, refuses, cannot be resolved or rejects the credentials makes the connection retry
+every few seconds; one line per attempt buries everything else (and at INFO it hid the outage). So the
+first failure of an outage is one WARNING naming host:port and the reason; while it lasts, one WARNING a
+minute with the count of failed attempts; when the connection is up again, one line saying how long it
+was down. A new reason (refused -> not authorised) is worth a line of its own, once per outage.
+
+The tracker also keeps what the status page, status.json and systemd's STATUS= show: connected since or
+down since, and the last error.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import ssl
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+SUMMARY_EVERY_S = 60.0
+
+REFUSED = "refused"
+UNRESOLVABLE = "unresolvable"
+NOT_AUTHORISED = "not authorised"
+TLS = "TLS"
+TIMED_OUT = "timed out"
+UNREACHABLE = "unreachable"
+LOST = "connection lost"
+CLOSED = "closed before CONNACK"
+
+
+def classify(error: BaseException | str) -> str:
+    """The reason in one word a person acts on: refused, unresolvable, not authorised, TLS, ..."""
+    if isinstance(error, ssl.SSLError | ssl.CertificateError):
+        return TLS
+    if isinstance(error, socket.gaierror):
+        return UNRESOLVABLE
+    if isinstance(error, ConnectionRefusedError):
+        return REFUSED
+    if isinstance(error, TimeoutError | socket.timeout):
+        return TIMED_OUT
+    text = str(error).lower()
+    for words, reason in ((("not authori", "bad user name", "password", "banned"), NOT_AUTHORISED),
+                          (("name or service not known", "nodename nor servname", "temporary failure in name",
+                            "no address associated"), UNRESOLVABLE),
+                          (("connection refused",), REFUSED),
+                          (("certificate", "ssl", "tls"), TLS),
+                          (("timed out",), TIMED_OUT),
+                          (("no route to host", "network is unreachable", "host is unreachable"), UNREACHABLE)):
+        if any(w in text for w in words):
+            return reason
+    return UNREACHABLE if isinstance(error, OSError) else "error"
+
+
+def duration_text(seconds: float) -> str:
+    """12s, 3m04s, 2h05m: how long an outage lasted, for people."""
+    s = round(seconds)
+    if s < 60:
+        return f"{s}s"
+    if s < 3600:
+        return f"{s // 60}m{s % 60:02d}s"
+    return f"{s // 3600}h{s % 3600 // 60:02d}m"
+
+
+@dataclass(frozen=True, slots=True)
+class BrokerState:
+    """One connection's broker session as the status readers show it (wall times, epoch seconds)."""
+
+    address: str  # host:port
+    client_id: str
+    connected: bool
+    since: float  # connected since, or down since
+    last_error: str  # "" until the first failure
+    reason: str  # the class of the last error (refused, unresolvable, ...); "" when none
+    failed_attempts: int  # in the current outage
+
+
+class BrokerTrouble:
+    """Follows one connection's attempts; logs an outage at its start, once a minute, and at its end."""
+
+    def __init__(self, host: str, port: int, client_id: str, logger: logging.Logger, *,
+                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time,
+                 summary_every_s: float = SUMMARY_EVERY_S) -> None:
+        self.address = f"{host}:{port}"
+        self.client_id = client_id
+        self._log = logger
+        self._clock = clock
+        self._wall = wall
+        self._summary_every_s = summary_every_s
+        self.connected = False
+        self.since = wall()  # down since the start: nothing connected yet
+        self._down_at = clock()  # monotonic twin of `since` while down
+        self.last_error = ""
+        self.reason = ""
+        self.failed_attempts = 0  # in this outage
+        self._reported: set[str] = set()  # the reasons this outage has said (a flapping cause says each once)
+        self._last_line_at = -float("inf")
+        self._since_line = 0  # failed attempts since the last line
+
+    def state(self) -> BrokerState:
+        return BrokerState(self.address, self.client_id, self.connected, self.since, self.last_error, self.reason,
+                           self.failed_attempts)
+
+    def failed(self, what: str, error: BaseException | str, extra: str = "", reason: str | None = None) -> None:
+        """A connect attempt failed (`what`: "connect failed", "TLS handshake failed", ...)."""
+        reason = reason or classify(error)
+        self.failed_attempts += 1
+        self._since_line += 1
+        self.last_error = f"{what}: {error}" if str(error) else what
+        self.reason = reason
+        now = self._clock()
+        if reason not in self._reported:
+            self._reported.add(reason)
+            self._line(now, "MQTT %s host=%s port=%s broker=%s client_id=%s reason=%s error=%s%s; retrying, "
+                       "summarised once a minute while it lasts", what, *self._host_port(), self.address,
+                       self.client_id, reason, error, f" hint={extra}" if extra else "")
+        elif now - self._last_line_at >= self._summary_every_s:
+            self._line(now, "MQTT broker still unavailable broker=%s client_id=%s down_for=%s reason=%s "
+                       "failed_attempts=%d (%d since the last line) last_error=%s", self.address, self.client_id,
+                       duration_text(now - self._down_at), reason, self.failed_attempts, self._since_line, error)
+        else:
+            self._log.debug("MQTT %s broker=%s client_id=%s attempt=%d error=%s", what, self.address,
+                            self.client_id, self.failed_attempts, error)
+
+    def up(self) -> str:
+        """The session is up (CONNACK accepted); returns the line to log ("" when there was no outage)."""
+        was_down = self.failed_attempts > 0 or bool(self._reported)
+        line = ""
+        if was_down:
+            line = (f"MQTT broker available again broker={self.address} client_id={self.client_id} down_for="
+                    f"{duration_text(self._clock() - self._down_at)} failed_attempts={self.failed_attempts}")
+        self.connected = True
+        self.since = self._wall()
+        self.failed_attempts = 0
+        self._since_line = 0
+        self._reported.clear()
+        self._last_line_at = -float("inf")
+        return line
+
+    def lost(self, reason: str) -> None:
+        """An established session ended without our asking: an outage starts (the caller logs the line)."""
+        self.down(reason)
+        self.reason = LOST
+        self._reported = {LOST}
+        self._last_line_at = self._clock()
+
+    def down(self, reason: str = "") -> None:
+        """The session ended (lost, or stopped by us)."""
+        if self.connected:
+            self.connected = False
+            self.since = self._wall()
+            self._down_at = self._clock()
+        if reason:
+            self.last_error = f"connection lost: {reason}"
+
+    def _host_port(self) -> tuple[str, str]:
+        host, _, port = self.address.rpartition(":")
+        return host, port
+
+    def _line(self, now: float, message: str, *args: object) -> None:
+        self._last_line_at = now
+        self._since_line = 0
+        self._log.warning(message, *args)
