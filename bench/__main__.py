@@ -1,7 +1,7 @@
 """`python -m bench [name ...] [--quick] [--repeat N]`: run benchmarks, print tables, save JSON.
 
-Names: codec, roundtrip, fleet, floor, writes, opcua (default: all but opcua, in that order). Results go to
-bench/results/.
+Names: codec, roundtrip, fleet, floor, writes, opcua, reload, outage (default: the first five, in that order).
+Results go to bench/results/.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from bench import codec, fleet, floor, opcua, roundtrip, writes
+from bench import codec, fleet, floor, opcua, outage, reload, roundtrip, writes
 from bench.report import Result, machine_info, render, save
 
-BENCHMARKS = ("codec", "roundtrip", "fleet", "floor", "writes", "opcua")
-DEFAULT = BENCHMARKS[:-1]  # opcua needs the [opcua] extra and takes minutes: asked for by name
+BENCHMARKS = ("codec", "roundtrip", "fleet", "floor", "writes", "opcua", "reload", "outage")
+DEFAULT = BENCHMARKS[:5]  # opcua needs the [opcua] extra; reload and outage run 1,000 machines: asked for by name
 
 
 def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
@@ -26,7 +26,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
     def run_fleet() -> Result:
         periods = [float(p) for p in args.period.split(",")] if args.period else None
         result = fleet.run(quick=args.quick, sizes=sizes, repeats=args.repeat, duration_s=args.duration,
-                           spy_to=spy, py_spy=args.py_spy, periods=periods, warmup_s=args.warmup)
+                           spy_to=spy, py_spy=args.py_spy, periods=periods, warmup_s=args.warmup,
+                           tracemalloc_to=Path(args.tracemalloc) if args.tracemalloc else None)
         return result
 
     return {
@@ -37,6 +38,11 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         "writes": lambda: writes.run(quick=args.quick),
         "opcua": lambda: opcua.run(quick=args.quick, machines=sizes[0] if sizes else None, duration_s=args.duration,
                                    repeats=args.repeat),
+        "reload": lambda: reload.run(sizes=sizes, period_s=float(args.period) if args.period else None,
+                                     duration_s=args.duration, quick=args.quick),
+        "outage": lambda: outage.run(machines=sizes[0] if sizes else None,
+                                     period_s=float(args.period) if args.period else None,
+                                     outage_s=args.outage, duration_s=args.duration, quick=args.quick),
     }
 
 
@@ -51,11 +57,17 @@ def main(argv: list[str] | None = None) -> int:
                         help="fleet: poll period of every machine, seconds; comma separated for several (default 0.1)")
     parser.add_argument("--warmup", type=float, default=None,
                         help="fleet: seconds between the last birth and the window (default 10)")
+    parser.add_argument("--outage", type=float, default=None, metavar="SECONDS",
+                        help="outage: how long the broker stays down (default 60)")
     parser.add_argument("--latency", type=float, default=roundtrip.LATENCY_S,
                         help="simulated per-request latency for roundtrip, seconds (default 0.002)")
     parser.add_argument("--spy", default="", metavar="FILE",
                         help="fleet: record py-spy collapsed stacks of the daemon during the window into FILE "
                              "(the largest size wins); summarise with python -m bench.profile_summary FILE")
+    parser.add_argument("--tracemalloc", default="", metavar="FILE",
+                        help="fleet: run the daemon under tracemalloc and write its live allocations by module "
+                             "at the end of the window into FILE (the largest size's first run; CPU figures "
+                             "of that run include tracemalloc's cost); summarise with python -m bench.memory_summary")
     parser.add_argument("--py-spy", default="py-spy", help="the py-spy executable")
     parser.add_argument("--results", type=Path, default=None, help="directory for JSON results")
     args = parser.parse_args(argv)

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import psutil
+
+from tests.helpers import Mosquitto, mosquitto_binary
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -69,13 +73,17 @@ class SimProcess:
 
 
 class DaemonProcess:
-    """`python -m edge run --config FILE` as a child (optionally under pyinstrument); its CPU is measurable."""
+    """`python -m edge run --config FILE` as a child (optionally under pyinstrument or tracemalloc); its CPU is
+    measurable."""
 
-    def __init__(self, config: Path, log: Path, profile_to: Path | None = None) -> None:
-        if profile_to is None:
-            command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
-        else:
+    def __init__(self, config: Path, log: Path, profile_to: Path | None = None,
+                 tracemalloc_to: Path | None = None) -> None:
+        if profile_to is not None:
             command = [sys.executable, "-m", "bench.profiled_daemon", str(config), str(profile_to)]
+        elif tracemalloc_to is not None:
+            command = [sys.executable, "-m", "bench.memory_daemon", str(config), str(tracemalloc_to)]
+        else:
+            command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
         self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
         self.proc = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, cwd=REPO,
                                      env=python_env())
@@ -96,6 +104,9 @@ class DaemonProcess:
     def rss_bytes(self) -> int:
         return int(self.process.memory_info().rss)
 
+    def open_fds(self) -> int:
+        return int(self.process.num_fds())
+
     def stop(self, timeout: float = 30.0) -> int | None:
         try:
             if self.proc.poll() is None:
@@ -108,3 +119,22 @@ class DaemonProcess:
             return self.proc.returncode
         finally:
             self._log.close()
+
+
+def stop_sims(sims: list[SimProcess]) -> None:
+    for sim in sims:
+        sim.stop()
+
+
+@contextlib.contextmanager
+def running_broker() -> Iterator[Mosquitto]:
+    """A mosquitto of the benchmark's own on a free port, closed on the way out."""
+    binary = mosquitto_binary()
+    if binary is None:
+        raise RuntimeError("mosquitto is not installed (make bench runs scripts/ensure-mosquitto.sh)")
+    broker = Mosquitto(binary)
+    try:
+        broker.start()
+        yield broker
+    finally:
+        broker.close()

@@ -28,15 +28,25 @@ OVERRUNS_METRIC = "Gateway/PollOverruns"
 class LatencySubscriber:
     """Subscribes to one Sparkplug group; `recording` decides whether latencies are kept."""
 
-    def __init__(self, host: str, port: int, group: str, stamp_metric: str, clock_metric: str = "") -> None:
+    def __init__(self, host: str, port: int, group: str, stamp_metric: str, clock_metric: str = "",
+                 track_seq: bool = False) -> None:
         self.group = group
+        self.track_seq = track_seq  # check the node's seq on every message (costs a decode per message)
+        self.seq_gaps: list[tuple[int, int]] = []  # (expected, got) where a message of the node went missing
+        self._last_seq: int | None = None
         self.stamp_metric = stamp_metric
         self.clock_metric = clock_metric
         self.recording = False
         self.change_latency_s: list[float] = []
         self.sample_latency_s: list[float] = []
         self.stamp_error_s: list[float] = []
+        # `sample` split where the gateway encodes the message (the payload timestamp): CNC stamp -> encoded
+        # (the CNC's answer in transit and queued in the gateway), encoded -> received (broker, subscriber).
+        self.in_gateway_s: list[float] = []
+        self.to_subscriber_s: list[float] = []
         self.births: set[str] = set()
+        self.birth_times: dict[str, float] = {}  # device -> receipt of its first DBIRTH
+        self.dbirths = Counter[str]()  # every DBIRTH per device: a second one is a rebirth
         self.deaths = 0
         self.ddata = Counter[str]()
         self.overruns: int | None = None
@@ -66,6 +76,8 @@ class LatencySubscriber:
             return
         kind = parts[2]
         data = bytes(message.payload)
+        if self.track_seq and kind != "NDEATH":
+            self._check_seq(kind, Payload.FromString(data).seq)
         if kind == "DDATA":
             self._ddata(parts[4], data, received)
         elif kind == "DBIRTH":
@@ -74,6 +86,13 @@ class LatencySubscriber:
             self._node(kind, data)
         elif kind == "DDEATH":
             self.deaths += 1
+
+    def _check_seq(self, kind: str, seq: int) -> None:
+        """Sparkplug's node-wide seq: each message of the node is the last one's + 1 (mod 256); NBIRTH is 0."""
+        if kind != "NBIRTH" and self._last_seq is not None and seq != (self._last_seq + 1) % 256:
+            with self._lock:
+                self.seq_gaps.append(((self._last_seq + 1) % 256, seq))
+        self._last_seq = seq
 
     def _ddata(self, device: str, data: bytes, received: float) -> None:
         self.ddata[device] += 1
@@ -84,6 +103,7 @@ class LatencySubscriber:
         if not metrics:
             return
         sample = received - metrics[0].timestamp / 1000
+        published = payload.timestamp / 1000  # the gateway's clock when it encoded the message
         stamp_alias = self._stamp_alias.get(device)
         clock_alias = self._clock_alias.get(device)
         change = error = None
@@ -94,6 +114,8 @@ class LatencySubscriber:
                 error = clock_macro_error(metric.timestamp / 1000, metric.double_value)
         with self._lock:
             self.sample_latency_s.append(sample)
+            self.in_gateway_s.append(published - metrics[0].timestamp / 1000)
+            self.to_subscriber_s.append(received - published)
             if change is not None:
                 self.change_latency_s.append(change)
             if error is not None:
@@ -108,6 +130,8 @@ class LatencySubscriber:
                 self._clock_alias[device] = metric.alias
         with self._lock:
             self.births.add(device)
+            self.birth_times.setdefault(device, time.time())
+            self.dbirths[device] += 1
 
     def _node(self, kind: str, data: bytes) -> None:
         payload = Payload.FromString(data)
@@ -123,7 +147,15 @@ class LatencySubscriber:
         with self._lock:
             change, sample = self.change_latency_s, self.sample_latency_s
             self.change_latency_s, self.sample_latency_s, self.stamp_error_s = [], [], []
+            self.in_gateway_s, self.to_subscriber_s = [], []
         return change, sample
+
+    def take_sample_split(self) -> tuple[list[float], list[float]]:
+        """The two parts of `sample` recorded so far: (in the gateway, to the subscriber); forgotten after."""
+        with self._lock:
+            split = self.in_gateway_s, self.to_subscriber_s
+            self.in_gateway_s, self.to_subscriber_s = [], []
+        return split
 
     def take_stamp_errors(self) -> list[float]:
         """Timestamp minus simulator clock, seconds, per clock-macro value recorded so far (and forget them)."""

@@ -50,7 +50,7 @@ check "DDATA arrives" /opt/focas-edge/bin/python /tmp/src/scripts/wait-for-messa
 echo "     first DDATA $((SECONDS - started)) s after start"
 while (( SECONDS - started < 30 )) && kill -0 "$daemon" 2>/dev/null; do sleep 1; done
 check "daemon still running after 30 s" kill -0 "$daemon"
-check "JSON data still flowing at 30 s" /opt/focas-edge/bin/python /tmp/src/scripts/wait-for-message.py 127.0.0.1 18830 "focas/sim-1/#" 60
+check "JSON data still flowing at 30 s" /opt/focas-edge/bin/python /tmp/src/scripts/wait-for-message.py 127.0.0.1 18830 "focas/arm64/gw/sim-1/#" 60
 kill -TERM "$daemon"; wait "$daemon"; rc=$?
 check "SIGTERM: exit 0" test "$rc" = 0
 grep -E "started|stopped|ERROR|Traceback" /tmp/daemon.log | sed 's/^/     /'

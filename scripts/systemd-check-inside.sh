@@ -163,6 +163,22 @@ check "data flows with it" wait_msg "spBv1.0/check/DDATA/gw/sim-1"
 systemctl stop focas-edge
 rm -r /etc/systemd/system/focas-edge.service.d && systemctl daemon-reload
 
+# One identity per gateway: a second gateway cloned from the first (its own state_dir, the same Sparkplug ids).
+config 1 > /etc/focas-edge/edge.yaml
+restart_clean
+systemctl start focas-edge
+{ echo "state_dir: /var/lib/focas-edge-clone"; config 1; } > /tmp/clone.yaml
+systemd-run --quiet --unit=focas-edge-clone /opt/focas-edge/bin/focas-edge run --config /tmp/clone.yaml
+conflict="identity conflict: another gateway uses Sparkplug id check/gw on this broker"
+check "a clone with the same Sparkplug ids: the ERROR naming the id in the journal" \
+    wait_until 90 bash -c "journalctl -u focas-edge -u focas-edge-clone --no-pager -o cat | grep -qF '$conflict'"
+check "... one ERROR per gateway at most, not one per reconnect" \
+    bash -c "both_journals() { journalctl -u focas-edge -u focas-edge-clone --no-pager -o cat; };
+             both_journals | grep -F '$conflict' | head -n 2; test \$(both_journals | grep -cF '$conflict') -le 2"
+check "... and neither unit restarted" test "$(systemctl show -p NRestarts --value focas-edge)" = 0
+systemctl stop focas-edge-clone focas-edge
+restart_clean
+
 echo "state_dir: /proc/nope" > /tmp/proc.yaml; config 1 >> /tmp/proc.yaml; cp /tmp/proc.yaml /etc/focas-edge/edge.yaml
 systemctl start focas-edge 2>/dev/null
 # "failed" (not "activating (auto-restart)"): RestartPreventExitStatus=2 means no restart is scheduled.

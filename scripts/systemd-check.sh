@@ -3,7 +3,8 @@
 # systemd added: no python3, no adduser; cached under .cache/) with systemd as PID 1 in systemd-nspawn,
 # install the package there with apt (so its Depends must bring everything) and run
 # scripts/systemd-check-inside.sh: data flows, reload, clean stop, journal lines, and the refusals (a second
-# instance, a root-owned state file, a port clash, a missing credential: exit 2, no restart). The container
+# instance, a root-owned state file, a port clash, a missing credential: exit 2, no restart; a clone with the
+# same Sparkplug ids: the identity conflict ERROR in the journal). The container
 # runs on a throwaway copy (--ephemeral) with only a loopback network, and is powered off and removed at the
 # end, pass or fail.
 set -euo pipefail

@@ -21,7 +21,7 @@ from edge.service.logformat import LOG_FORMATS, configure_logging
 # Subcommand modules in the order `--help` lists them. Each defines
 #   register(subparsers) -> None   adding its parser with set_defaults(func=handler)
 # where handler(args) -> int returns the exit code.
-SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config", "fwlib_host"]
+SUBCOMMANDS = ["run", "sim", "read", "write", "probe", "init", "watch", "check_config", "acl", "fwlib_host"]
 
 __all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_PARTIAL", "EXIT_USAGE", "SUBCOMMANDS", "build_parser", "main"]
 

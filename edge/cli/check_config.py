@@ -9,13 +9,14 @@ same line, because both ask the same functions.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
 from edge import ConfigError
 from edge.cli import EXIT_OK, EXIT_USAGE
-from edge.config import Config, listen_port, load_config
+from edge.config import GATEWAY_ENV, Config, listen_port, load_config
 from edge.config.service_access import (
     SERVICE_USER,
     current_account,
@@ -45,16 +46,27 @@ def register(subparsers: Any) -> None:
                              "state_dir is then fine (a reload or restart of it)")
     parser.add_argument("--service-user", default=SERVICE_USER, metavar="NAME",
                         help=f"the service's user for --as-service (default {SERVICE_USER})")
+    parser.add_argument("--gateway", default=os.environ.get(GATEWAY_ENV) or None, metavar="NAME",
+                        help="in a fleet file with gateways:, check it as this gateway runs it (its overrides, "
+                             "secrets, state_dir, ports) and list the machines it polls and those it leaves to "
+                             f"the others (default ${GATEWAY_ENV}); without it, every gateway's view is validated "
+                             "and the split is shown")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     notes: list[str] = []
+    gateway = getattr(args, "gateway", None)  # a Namespace built by hand may lack it
     try:
         # As the service, the password is the unit's business (EnvironmentFile=, LoadCredential=), not this shell's.
-        config = load_config(args.config, secrets=not args.as_service)
-        problems = usability_problems(config, Path(args.config), args.service_user if args.as_service else None,
-                                      notes)
+        config = load_config(args.config, secrets=not args.as_service, gateway=gateway)
+        if config.fleet and gateway is None:
+            problems = []
+            notes.append(f"a fleet file for {len(config.fleet)} gateways: give --gateway NAME (or {GATEWAY_ENV}) "
+                         f"on a gateway's box to check what it runs there (secrets, state_dir, ports)")
+        else:
+            problems = usability_problems(config, Path(args.config),
+                                          args.service_user if args.as_service else None, notes)
     except ConfigError as exc:
         problems = exc.problems
     if problems:
@@ -67,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     if not args.quiet:
-        print(summary(config, args.config))
+        print(summary(config, args.config) if not config.fleet or gateway else fleet_summary(config, args.config))
     return EXIT_OK
 
 
@@ -110,7 +122,7 @@ def summary(config: Config, source: str) -> str:
         host = f", primary host {sp.primary_host_id}" if sp.primary_host_id else ""
         lines.append(f"  sparkplug  spBv1.0/{sp.group_id}/+/{sp.edge_node_id}{host}")
     if "json" in mqtt.formats:
-        lines.append(f"  json       {mqtt.json_topics.prefix}/<machine>/...")
+        lines.append(f"  json       {mqtt.json_prefix}/<machine>/...")
     if config.opcua.enabled:
         ua = config.opcua
         who = ", ".join([u.username for u in ua.users] + (["anonymous"] if ua.allow_anonymous else []))
@@ -119,6 +131,8 @@ def summary(config: Config, source: str) -> str:
     lines.append(f"  state_dir  {config.resolved_state_dir}")
     lines.append(f"  writes     {'enabled' if config.writes.enabled else 'disabled'}"
                  f" ({len(config.writes.allow)} global allow rule(s))")
+    if config.gateway is not None:
+        lines.extend(gateway_lines(config))
     lines.append(f"  machines   {len(config.machines)}")
     for machine in config.machines:
         poll = machine.poll
@@ -131,4 +145,21 @@ def summary(config: Config, source: str) -> str:
             if machine.paths > 1 else ""
         lines.append(f"    {machine.id:<16} {machine.transport} {machine.endpoint}{routed}  tz {machine.timezone}  "
                      f"status every {poll.periods.status:g}s  {counts}  alarms {alarms.mode}{paths}")
+    return "\n".join(lines)
+
+
+def gateway_lines(config: Config) -> list[str]:
+    """Which gateway this is, and the machines of the fleet file it leaves to the other gateways."""
+    others = {name: ids for name, ids in config.fleet.items() if name != config.gateway}
+    lines = [f"  gateway    {config.gateway} (of {', '.join(config.fleet)}): polls "
+             f"{len(config.machines)} machine(s), leaves {sum(len(ids) for ids in others.values())} to the others"]
+    lines += [f"    left to {name:<10} {', '.join(ids) or '(none)'}" for name, ids in others.items()]
+    return lines
+
+
+def fleet_summary(config: Config, source: str) -> str:
+    """A fleet file checked without --gateway: every gateway's view is valid; who polls what."""
+    lines = [f"{source}: valid for every gateway ({len(config.fleet)})"]
+    for name, ids in config.fleet.items():
+        lines.append(f"  gateway {name:<12} {len(ids)} machine(s): {', '.join(ids) or '(none)'}")
     return "\n".join(lines)

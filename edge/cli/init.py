@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import re
 import socket
 import sys
@@ -12,6 +13,7 @@ from typing import Any
 
 from edge import ConfigError
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from edge.cli.acl import account_names
 
 DEFAULT_TIMEOUT = 5.0
 DEFAULT_GROUP = "plant"
@@ -77,6 +79,20 @@ def _ids(args: argparse.Namespace) -> list[str]:
     return ids
 
 
+def _check_hosts(args: argparse.Namespace) -> None:
+    """A mistyped address (192.168.10.577) is a usage error naming it, before anything is probed."""
+    from edge.config.fields import check_host
+    from edge.focas.connect import parse_address
+
+    for address in [*args.addresses, args.broker]:
+        host = parse_address(address).host
+        if host:  # empty for unix:/path
+            try:
+                check_host(host)
+            except ValueError as exc:
+                raise ValueError(f"{address}: {exc}") from None
+
+
 def _broker(text: str) -> tuple[str, int]:
     from edge.focas.connect import parse_address
 
@@ -97,6 +113,54 @@ async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
         return ProbedMachine(machine_id, parsed.host, parsed.port, args.transport, report)
 
     return list(await asyncio.gather(*(one(a, i) for a, i in zip(args.addresses, ids, strict=True))))
+
+
+SNIFF_S = 1.5  # how long a port that answered may take to say what it is (SSH, FTP, telnet greet first)
+
+
+async def what_answered(host: str, port: int, probe_error: str, timeout: float) -> str | None:
+    """What answered at an address the FOCAS probe failed on; None when nothing did (refused, unreachable,
+    or a port that accepts and says nothing).
+
+    Listen-only: nothing is sent, so a device that is not a CNC gets no bytes from this look. The probe's own
+    error still says how the FOCAS hello was answered (an HTTP server answers it with 'HTTP').
+    """
+    try:
+        reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+    except (OSError, TimeoutError):
+        return None
+    try:
+        try:
+            data = await asyncio.wait_for(reader.read(256), min(timeout, SNIFF_S))
+        except (OSError, TimeoutError):
+            data = None
+    finally:
+        writer.close()
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(writer.wait_closed(), 1.0)
+    if data:
+        return f"it sent {greeting(data)}"
+    if data == b"":
+        return f"it accepted the connection and closed it; the FOCAS hello got: {readable_error(probe_error)}"
+    if "got " in probe_error:  # silent until spoken to, then not FOCAS (an HTTP server)
+        return f"the FOCAS hello got: {readable_error(probe_error)}"
+    return None  # a port that accepts and stays silent: maybe a busy CNC, so "not reached", not "not FOCAS"
+
+
+def greeting(data: bytes) -> str:
+    """A service's first bytes for people: its first line if it is text, else hex."""
+    line = data.split(b"\n", 1)[0].rstrip(b"\r")
+    if line and all(32 <= byte < 127 for byte in line):
+        return repr(line[:80].decode("ascii"))
+    return f"{len(data)} byte(s) {data[:16].hex(' ')}"
+
+
+def readable_error(error: str) -> str:
+    """The probe's error, with the bytes it quotes in hex also shown as text when they are (e.g. 'HTTP')."""
+    def text(match: re.Match[str]) -> str:
+        raw = bytes.fromhex(match[1])
+        return match[0] + (f" ({raw.decode('ascii')!r})" if all(32 <= b < 127 for b in raw) else "")
+    return re.sub(r"got ([0-9a-f]{8})\b", text, error)
 
 
 def installation_command() -> str:
@@ -127,6 +191,10 @@ def _service_reach(command: str) -> list[str]:
     return [p for p in (unreadable_file(account, "ExecStart", program) for program in sorted(programs)) if p]
 
 
+async def _what_answered_all(failed: list[Any], timeout: float) -> list[str | None]:
+    return list(await asyncio.gather(*(what_answered(m.host, m.port, m.report.error, timeout) for m in failed)))
+
+
 def handle(args: argparse.Namespace) -> int:
     from edge.config.init_writer import render_config
 
@@ -138,8 +206,8 @@ def handle(args: argparse.Namespace) -> int:
     acl = _acl_path(args, output)
     if acl is not None and acl.exists() and not args.force:
         return _usage(f"{acl} exists; use --force to overwrite it")
-    users = args.acl_users.split(":")
-    if len(users) != 2 or not all(users) or any(c in args.acl_users for c in " #+/") or users[0] == users[1]:
+    users = account_names(args.acl_users)
+    if users is None:
         return _usage(f"--acl-users {args.acl_users!r}: expected GATEWAY:MES, two different account names")
     if args.units is not None:
         from edge.config.bundled import write_bundled
@@ -154,6 +222,7 @@ def handle(args: argparse.Namespace) -> int:
             print(f"focas-edge init: warning: {warning}", file=sys.stderr)
     try:
         ids = _ids(args)
+        _check_hosts(args)
         broker_host, broker_port = _broker(args.broker)
         node = args.node or re.sub(r"[^A-Za-z0-9_.-]+", "-", socket.gethostname()) or "gateway"
         from edge.config import check_sparkplug_id
@@ -164,13 +233,18 @@ def handle(args: argparse.Namespace) -> int:
     except (ValueError, ConfigError) as exc:
         return _usage("; ".join(exc.problems) if isinstance(exc, ConfigError) else str(exc))
     reached = [m for m in probed if m.report.complete]
-    missed = [(m.report.address, m.report.error) for m in probed if not m.report.complete]
+    failed = [m for m in probed if not m.report.complete]
+    answered = asyncio.run(_what_answered_all(failed, args.timeout))
+    missed = [(m.report.address, m.report.error) for m, what in zip(failed, answered, strict=True) if what is None]
+    not_focas = [(f"{m.host}:{m.port}", what) for m, what in zip(failed, answered, strict=True) if what is not None]
     for address, reason in missed:
         print(f"focas-edge init: {address}: {reason}", file=sys.stderr)
+    for address, what in not_focas:
+        print(f"focas-edge init: {address} answered but not FOCAS: {what}", file=sys.stderr)
     if not reached:
         print("focas-edge init: no CNC answered; nothing written", file=sys.stderr)
         return EXIT_FAILURE
-    text = render_config(reached, missed, broker_host, broker_port, args.group, node)
+    text = render_config(reached, missed, broker_host, broker_port, args.group, node, not_focas)
     if acl is not None:
         _write_acl(acl, text, users[0], users[1])
     if output is None:
@@ -179,7 +253,7 @@ def handle(args: argparse.Namespace) -> int:
         output.write_text(text, encoding="utf-8")
         print(f"wrote {output}: {len(reached)} machine(s); check it with `focas-edge check-config {output}`",
               file=sys.stderr)
-    return EXIT_FAILURE if missed else EXIT_OK
+    return EXIT_FAILURE if failed else EXIT_OK
 
 
 def _acl_path(args: argparse.Namespace, output: Path | None) -> Path | None:

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
 from edge import ConfigError
 from edge.cli import EXIT_USAGE
+from edge.config import GATEWAY_ENV
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                "the systemd unit), other non-zero an unexpected failure.")
     parser.add_argument("--config", "-c", type=Path, default=Path("/etc/focas-edge/edge.yaml"),
                         help="the YAML config file (default /etc/focas-edge/edge.yaml)")
+    parser.add_argument("--gateway", default=os.environ.get(GATEWAY_ENV) or None, metavar="NAME",
+                        help="in a fleet file with gateways:, the gateway this process is: it polls only the machines "
+                             f"that name it (default ${GATEWAY_ENV}; docs/config.md, docs/install.md)")
     parser.set_defaults(func=handle)
 
 
@@ -32,7 +37,7 @@ def handle(args: argparse.Namespace) -> int:
     from edge.service.daemon import run_daemon
 
     try:
-        return run_daemon(args.config)
+        return run_daemon(args.config, gateway=args.gateway)
     except ConfigError as exc:
         single = f"{exc.source}: {exc.problems[0]}" if len(exc.problems) == 1 else str(exc)
         print(f"focas-edge: {single}", file=sys.stderr)

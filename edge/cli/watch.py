@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -11,6 +12,7 @@ from pathlib import Path
 
 from edge import ConfigError
 from edge.cli import EXIT_USAGE
+from edge.config import GATEWAY_ENV
 from edge.publish import PublishSettings
 
 DEFAULT_HOST = "127.0.0.1"
@@ -30,6 +32,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                "is retried, not an error.")
     parser.add_argument("--config", "-c", type=Path, metavar="FILE",
                         help="take broker, group, JSON prefix and formats from this daemon config")
+    parser.add_argument("--gateway", default=os.environ.get(GATEWAY_ENV) or None, metavar="NAME",
+                        help="with a fleet file (gateways:), take the broker and ids of this gateway (default "
+                             f"${GATEWAY_ENV}; without it, the first gateway's)")
     parser.add_argument("--host", help=f"broker host (default {DEFAULT_HOST})")
     parser.add_argument("--port", type=int, help=f"broker port (default {DEFAULT_PORT})")
     parser.add_argument("--group", help="Sparkplug group id to watch (default: all)")
@@ -60,7 +65,7 @@ def watch_plan(args: argparse.Namespace) -> WatchPlan:
         from edge.config import load_config
         from edge.service.settings import publish_settings
 
-        credentials = publish_settings(load_config(args.config))
+        credentials = publish_settings(load_config(args.config, gateway=getattr(args, "gateway", None)))
         host, port, prefix = credentials.host, credentials.port, credentials.json_prefix
         group = credentials.group_id if "sparkplug" in credentials.formats else group
         sparkplug, json_topics = "sparkplug" in credentials.formats, "json" in credentials.formats

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from edge.collect.clock import SYNC_TARGET_S
+from edge.collect.execution import CONTROLLER_MODE, EXECUTION, derive
 from edge.collect.settings import PollSettings
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
@@ -77,6 +78,8 @@ STATUS_METRICS: tuple[tuple[MetricSpec, Callable[[StatInfo], object]], ...] = (
     (MetricSpec("Status/Edit", MetricType.INT16), lambda s: s.edit),
     (MetricSpec("Status/MSTB", MetricType.BOOLEAN, description="M/S/T/B function finishing"),
      lambda s: s.mstb == 1),
+    (EXECUTION, lambda s: derive(s).execution),  # the MES vocabulary, edge.collect.execution
+    (CONTROLLER_MODE, lambda s: derive(s).controller_mode),
 )
 
 SYSINFO_METRICS: tuple[tuple[MetricSpec, Callable[[SysInfo], object]], ...] = (
@@ -158,19 +161,18 @@ class MachinePlan:
 
     @classmethod
     def build(cls, poll: PollSettings, static: StaticInfo | None = None) -> MachinePlan:
+        """A fresh plan (the poller tells sessions apart by its identity) around reads shared by every machine
+        with the same poll settings and static answers: the reads and their metric specs are most of a plan's
+        memory, and a fleet of one model would otherwise hold a copy per machine."""
         static = static or StaticInfo()
-        reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
-        reads += (_program_reads(poll) + _load_reads(poll, static) + _counter_reads(poll)
-                  + _work_offset_reads(poll, static) + _library_reads(poll))
-        reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
-        reads += _macro_reads(poll)
-        reads += _pmc_reads(poll)
-        reads += _numbered_reads(poll, static)
-        if poll.alarm_history:
-            reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(poll.alarm_history_depth),
-                                     (ALARM_HISTORY,)))
+        key = (poll, static)
+        reads = _SHARED_READS.get(key)
+        if reads is None:
+            if len(_SHARED_READS) >= SHARED_READS_LIMIT:
+                _SHARED_READS.clear()
+            reads = _SHARED_READS[key] = _build_reads(poll, static)
         periods = poll.periods
-        return cls(tuple(reads), {
+        return cls(reads, {
             Group.STATUS: periods.status, Group.ACTIVE_ALARMS: periods.status, Group.MACROS: periods.macros,
             Group.PMC: periods.pmc, Group.PARAMS: periods.params, Group.DIAGS: periods.diags,
             Group.LOADS: periods.loads, Group.COUNTERS: periods.counters, Group.ALARM_HISTORY: periods.alarm_history})
@@ -201,6 +203,24 @@ class MachinePlan:
         for read in self.reads:
             bands.update(read.deadband_map())
         return bands
+
+
+SHARED_READS_LIMIT = 256  # distinct (poll settings, static answers) pairs kept; a fleet has a few models
+_SHARED_READS: dict[tuple[PollSettings, StaticInfo], tuple[PlannedRead, ...]] = {}
+
+
+def _build_reads(poll: PollSettings, static: StaticInfo) -> tuple[PlannedRead, ...]:
+    reads = [*_static_reads(), *_status_reads(poll.positions, poll.part_count, static)]
+    reads += (_program_reads(poll) + _load_reads(poll, static) + _counter_reads(poll)
+              + _work_offset_reads(poll, static) + _library_reads(poll))
+    reads.append(PlannedRead(Group.ACTIVE_ALARMS, it.ReadActiveAlarms(), (ALARM_ACTIVE, ALARM_COUNT)))
+    reads += _macro_reads(poll)
+    reads += _pmc_reads(poll)
+    reads += _numbered_reads(poll, static)
+    if poll.alarm_history:
+        reads.append(PlannedRead(Group.ALARM_HISTORY, it.ReadAlarmHistory(poll.alarm_history_depth),
+                                 (ALARM_HISTORY,)))
+    return tuple(reads)
 
 
 def drop_key(item: it.ReadItem) -> str:
@@ -361,6 +381,20 @@ def metric_values(read: PlannedRead, result: object) -> list[tuple[MetricSpec, o
 
 
 ValueExtractor = Callable[[object], list[object]]
+_SHARED_EXTRACTORS: dict[int, tuple[PlannedRead, ValueExtractor]] = {}  # id(read) -> (read, its extractor)
+
+
+def shared_value_extractor(read: PlannedRead) -> ValueExtractor:
+    """value_extractor, one per read object for the whole process: the reads of a plan are shared by every
+    machine polling alike (MachinePlan.build), and an extractor depends on nothing else (it keeps no state)."""
+    found = _SHARED_EXTRACTORS.get(id(read))
+    if found is not None and found[0] is read:
+        return found[1]
+    if len(_SHARED_EXTRACTORS) >= SHARED_READS_LIMIT * 64:
+        _SHARED_EXTRACTORS.clear()
+    extractor = value_extractor(read)
+    _SHARED_EXTRACTORS[id(read)] = (read, extractor)
+    return extractor
 
 
 def value_extractor(read: PlannedRead) -> ValueExtractor:

@@ -36,6 +36,8 @@ from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock_feed import ClockFeed
 from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
+from edge.collect.plant_state import SPECS as PLANT_STATE_SPECS
+from edge.collect.plant_state import PlantState
 from edge.collect.settings import MachineSettings
 from edge.collect.stats import PollerStats
 from edge.collect.tick_batch import ReadKind, TickBatch
@@ -43,7 +45,7 @@ from edge.collect.tickgrid import TickGrid
 from edge.focas import items as it
 from edge.focas.connect import open_session
 from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
-from edge.focas.model import ActiveAlarm, AlarmHistoryEntry
+from edge.focas.model import ActiveAlarm, AlarmHistoryEntry, StatInfo
 from edge.focas.session import CncSession
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 
@@ -133,6 +135,7 @@ class MachinePoller:
         self._last_raw: list[object] = []
         self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
         self._paths = PathCheck(machine)
+        self.plant_state = PlantState(machine.id, machine.zone, state_dir)  # availability, utilisation
 
     @property
     def machine_id(self) -> str:
@@ -186,9 +189,15 @@ class MachinePoller:
         if changed and self.online:
             await self.sink.device_data(self.machine_id, changed)
 
+    async def _publish_born(self, samples: Sequence[Sample]) -> None:
+        """Publish while the device is born; before that, the birth will carry the values (not filtered away)."""
+        if self.online and (changed := self._changes.filter(samples)):
+            await self.sink.device_data(self.machine_id, changed)
+
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> None:
         """Connect (with backoff), poll until the session breaks, go offline, repeat. Cancel to stop."""
+        self._start_minutes()
         await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
         while True:
             await self._connect()
@@ -201,8 +210,17 @@ class MachinePoller:
                 await self._go_offline()
                 await self.session.reset()
 
+    def _start_minutes(self) -> None:
+        """The utilisation minute publish, a task of its own that ends with the run task."""
+        minutes = asyncio.create_task(self.plant_state.run_minutes(self.cnc_time_ms, self._publish_born),
+                                      name=f"utilisation-{self.machine_id}")
+        run_task = asyncio.current_task()
+        if run_task is not None:
+            run_task.add_done_callback(lambda _: minutes.cancel())
+
     async def close(self) -> None:
-        """Send the close PDU (the run task must already be cancelled)."""
+        """Save the utilisation counters, send the close PDU (the run task must already be cancelled)."""
+        self.plant_state.close(self.cnc_time_ms())
         with contextlib.suppress(Exception):
             await self.session.close()
 
@@ -234,11 +252,14 @@ class MachinePoller:
 
     async def _go_offline(self) -> None:
         self.session_up.clear()
+        unavailable = self.plant_state.offline(self.cnc_time_ms())  # counted OFFLINE even if never born
         if not self.online:
             return
         self.online = False
         self.online_changed_at = time.time()
         self.stats.disconnects += 1
+        with contextlib.suppress(Exception):  # before the death: a dead device carries no data
+            await self.sink.device_data(self.machine_id, self._changes.filter(unavailable))
         with contextlib.suppress(Exception):
             await self.sink.device_offline(self.machine_id)
 
@@ -261,8 +282,9 @@ class MachinePoller:
         self._last_raw = [_NOTHING] * len(plan.reads)
         self._clock.new_session()
         first = await self._tick(plan, frozenset(plan.periods))
-        specs = [*plan.metrics(), DROPPED_FUNCTIONS]
+        specs = [*plan.metrics(), DROPPED_FUNCTIONS, *PLANT_STATE_SPECS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
+        extra += self.plant_state.birth_samples(extra[-1].timestamp_ms)
         if paths is not None:
             specs.append(PATH_COUNT)
             extra.append(Sample(PATH_COUNT.name, paths, PATH_COUNT.type, extra[-1].timestamp_ms))
@@ -358,7 +380,7 @@ class MachinePoller:
         """One extractor per read of the plan, shared by every combination of groups it appears in."""
         found = self._extractors.get(id(read))
         if found is None:
-            found = self._extractors[id(read)] = pl.value_extractor(read)
+            found = self._extractors[id(read)] = pl.shared_value_extractor(read)
         return found
 
     async def _tick(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickResult:
@@ -381,6 +403,7 @@ class MachinePoller:
         samples: list[Sample] = []
         events: list[Sample] = []
         alarm_status: int | None = None
+        status: StatInfo | None = None
         history: list[AlarmHistoryEntry] | None = None
         last_raw = self._last_raw
         report = self._changes.report
@@ -408,6 +431,8 @@ class MachinePoller:
             last_raw[position] = result
             if kind is ReadKind.ALARM_STATUS:
                 alarm_status = int(result)
+            elif kind is ReadKind.STATUS:
+                status = result
             values = batch.extractors[index](result)
             if batch.elementwise[index] and type(previous) is list and type(result) is list:
                 # A list that moved (macros, a PMC range, positions): offer only the elements that moved;
@@ -425,6 +450,8 @@ class MachinePoller:
                     samples.append(sample)
         if clock_observed or self._clock.news:
             self._clock.samples(timestamp, mid_mono, self._changes.report, samples)
+        if status is not None and (moved := self.plant_state.status(status, timestamp)):
+            samples.extend(self._changes.filter(moved))
         if alarm_status is not None and self._alarms.status_changed(alarm_status):
             events.extend(await self._read_active_alarms(plan, timestamp, samples))
         fresh = self._history_entries(history) if history else []
@@ -523,6 +550,8 @@ class MachinePoller:
     def _item_failed(self, read: pl.PlannedRead, error: FocasError, timestamp: int,
                      samples: list[Sample]) -> None:
         self._count_failure(pl.drop_key(read.item), error)
+        if isinstance(read.item, it.ReadStatus):
+            samples.extend(self._changes.filter(self.plant_state.status_failed(timestamp)))
         if isinstance(error, FunctionNotAvailable | NotSupported) and self._plan is not None:
             operation = pl.drop_key(read.item)
             if operation not in self._dropped:

@@ -24,6 +24,7 @@ class ReadKind(enum.Enum):
     VALUES = "values"
     ALARM_STATUS = "alarm_status"  # also decides whether the active alarms are read
     ALARM_HISTORY = "alarm_history"  # published as events, not values
+    STATUS = "status"  # also feeds utilisation (edge.collect.plant_state) when the word changed
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +48,7 @@ class TickBatch:
               positions: Sequence[int] | None = None) -> TickBatch:
         kinds = tuple(ReadKind.ALARM_STATUS if isinstance(r.item, it.ReadAlarmStatus)
                       else ReadKind.ALARM_HISTORY if isinstance(r.item, it.ReadAlarmHistory)
+                      else ReadKind.STATUS if isinstance(r.item, it.ReadStatus)
                       else ReadKind.VALUES for r in reads)
         where = tuple(range(len(reads)) if positions is None else positions)
         if len(where) != len(reads):

@@ -12,6 +12,7 @@ line in the file; soft findings land in `Config.warnings`. What lives here:
   root            Config, the top level (http, spool, state_dir) and the questions across sections
   load            YAML (a key given twice is refused) to Config, problems with paths and lines, cross-checks
   merge, lines    `defaults:`/`templates:` expanded into each machine; problem paths mapped to line numbers
+  gateways        `gateways:` one fleet file for many gateways: who polls which machine, per-gateway overrides
   service_access  can the daemon's account (or the systemd service's) read and write what the config names
   service_unit    what the installed focas-edge.service hands the daemon: environment and credentials
   listen_port     can the status endpoint (`http:`) and the OPC UA server (`opcua:`) listen where the
@@ -30,6 +31,7 @@ Rules:
 """
 
 from edge.config.fields import check_sparkplug_id
+from edge.config.gateways import GATEWAY_ENV
 from edge.config.load import format_path, load_config, parse_config
 from edge.config.machines import AlarmsConfig, MachineConfig
 from edge.config.poll import SHORTEST_PERIOD_S, PollPlan
@@ -38,6 +40,7 @@ from edge.config.writes import AllowRule, RateLimit, WritePolicy
 
 __all__ = [
     "DEFAULT_STATE_DIR",
+    "GATEWAY_ENV",
     "SHORTEST_PERIOD_S",
     "AlarmsConfig",
     "AllowRule",

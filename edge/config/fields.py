@@ -1,13 +1,15 @@
 """The field types every section shares, and the model base.
 
 Durations accept seconds as a number or a string with a unit (`250ms`, `1s`, `5m`, `1h`, `7d`). Sparkplug
-ids and metric names become topic levels and metric paths, so they are checked where the file is read.
+ids and metric names become topic levels and metric paths, and host names and IP addresses are checked for
+form (not resolved), all where the file is read.
 Every model refuses unknown keys (a typo must not silently fall back to a default) and is frozen; `_at`
 lets a model validator name the key below it that is wrong (load.format_errors turns it into a path).
 """
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from pathlib import Path
 from typing import Annotated
@@ -49,6 +51,46 @@ def check_sparkplug_id(value: str) -> str:
 
 
 SparkplugId = Annotated[str, BeforeValidator(lambda v: check_sparkplug_id(v) if isinstance(v, str) else v)]
+
+
+_LABEL_RE = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?", re.ASCII)
+
+
+def check_host(value: str) -> str:
+    """An IPv4/IPv6 address or a DNS name (never resolved here: a broker may not be up when the file is read).
+
+    A name whose last label is all digits can only be meant as an IPv4 address, so `192.168.10.577` is
+    refused as one instead of being looked up as a name for ever. Underscores pass: DNS allows them and
+    container service names use them.
+    """
+    text = value.strip()
+    if not text or text != value:
+        raise ValueError(f"{value!r}: expected an IP address or a host name, without spaces")
+    if ":" in text:
+        try:
+            ipaddress.IPv6Address(text.removeprefix("[").removesuffix("]"))
+        except ValueError:
+            raise ValueError(f"{value!r} is not a valid IPv6 address") from None
+        return value
+    labels = text.removesuffix(".").split(".")
+    if labels[-1].isdigit():
+        try:
+            ipaddress.IPv4Address(text)
+        except ValueError:
+            over = [label for label in labels if label.isdigit() and int(label) > 255]
+            why = f" ({over[0]} is more than 255)" if over else " (four numbers 0..255, e.g. 192.168.1.20)"
+            raise ValueError(f"{value!r} is not a valid IPv4 address{why}") from None
+        return value
+    bad = next((label for label in labels if not _LABEL_RE.fullmatch(label)), None)
+    if bad is not None or len(text) > 253:
+        what = ("it is longer than 253 characters" if bad is None
+                else "an empty label (two dots in a row)" if not bad else f"label {bad!r}")
+        raise ValueError(f"{value!r} is not a valid host name: {what}; a host name is labels of letters, digits "
+                         "and '-' (1..63 each, not starting or ending with '-') separated by dots")
+    return value
+
+
+HostName = Annotated[str, BeforeValidator(lambda v: check_host(v) if isinstance(v, str) else v)]
 
 
 def check_file(value: Path | None) -> Path | None:

@@ -89,8 +89,10 @@ def _quoted(text: str) -> str:
 
 
 def render_config(machines: list[ProbedMachine], unreachable: list[tuple[str, str]], broker_host: str,
-                  broker_port: int, group_id: str, edge_node_id: str) -> str:
-    """The commented YAML for the probed machines; unreachable ones (address, reason) are listed as comments."""
+                  broker_port: int, group_id: str, edge_node_id: str,
+                  not_focas: list[tuple[str, str]] | None = None) -> str:
+    """The commented YAML for the probed machines; unreachable ones (address, reason) are listed as comments,
+    and so are addresses where something else answered (address, what answered): a wrong port, say."""
     out = [
         "# focas-edge config written by `focas-edge init` from what each CNC answered to a read-only probe.",
         "# Check it with `focas-edge check-config FILE`; reference: docs/config.md.",
@@ -135,4 +137,6 @@ def render_config(machines: list[ProbedMachine], unreachable: list[tuple[str, st
         where = parse_address(address)
         out.append(f"  # NOT REACHED {address}: {reason}")
         out.append(f"  # - {{id: {machine_id_for(address)}, host: {where.host}, port: {where.port}}}")
+    for address, what in not_focas or []:
+        out.append(f"  # {address} answered but not FOCAS: {what}")
     return "\n".join(out) + "\n"

@@ -14,7 +14,7 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from pydantic import Field, field_validator, model_validator
 
-from edge.config.fields import Duration, SparkplugId, _at, _Model
+from edge.config.fields import Duration, HostName, SparkplugId, _at, _Model, check_host
 from edge.config.poll import PollPlan
 from edge.config.writes import MachineWrites
 from edge.focas.paths import MAX_PATHS
@@ -47,7 +47,7 @@ _PACKED_ADDRESS_RE = re.compile(r"tcp:[^:\s]+:\d{1,5}|unix:/\S+", re.ASCII)
 
 class MachineConfig(_Model):
     id: SparkplugId
-    host: str | None = None
+    host: HostName | None = None
     port: int = Field(default=NATIVE_PORT, ge=1, le=65535)
     transport: Literal["focas", "packed"] = "focas"
     address: str | None = None
@@ -67,6 +67,8 @@ class MachineConfig(_Model):
     # `<id>-path<n>` (see path_devices). `path` is the one this entry's session reads.
     paths: int = Field(default=1, ge=1, le=MAX_PATHS)
     path: int = Field(default=1, ge=1, le=MAX_PATHS)
+    # The gateway that polls this machine, in a fleet file with `gateways:` (edge.config.gateways).
+    gateway: str | None = None
 
     def path_devices(self) -> list[MachineConfig]:
         """This machine, then one entry per further path: same settings, id `<id>-path<n>`, path n."""
@@ -89,6 +91,8 @@ class MachineConfig(_Model):
     def _address(cls, value: str | None) -> str | None:
         if value is not None and not _PACKED_ADDRESS_RE.fullmatch(value):
             raise ValueError(f"expected tcp:HOST:PORT or unix:/PATH, got {value!r}")
+        if value is not None and value.startswith("tcp:"):
+            check_host(value.removeprefix("tcp:").rpartition(":")[0])
         return value
 
     @model_validator(mode="after")

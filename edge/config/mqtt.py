@@ -9,6 +9,7 @@ raw data.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Literal
@@ -16,7 +17,7 @@ from typing import Annotated, Literal
 from pydantic import BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from edge import ConfigError
-from edge.config.fields import SparkplugId, _at, _Model, check_file
+from edge.config.fields import HostName, SparkplugId, _at, _Model, check_file
 
 Format = Literal["sparkplug", "json"]
 FORMATS: tuple[Format, ...] = ("sparkplug", "json")
@@ -47,11 +48,13 @@ class SparkplugConfig(_Model):
 
 
 class JsonConfig(_Model):
-    prefix: str = "focas"
+    prefix: str | None = None  # default: focas/<group_id>/<edge_node_id> (MqttConfig.json_prefix)
 
     @field_validator("prefix")
     @classmethod
-    def _topic_prefix(cls, value: str) -> str:
+    def _topic_prefix(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
         if not value or value.startswith("/") or value.endswith("/") or "//" in value:
             raise ValueError(f"{value!r}: expected topic levels like 'plant1/focas', no empty level")
         if "+" in value or "#" in value:
@@ -66,7 +69,7 @@ def _protocol(value: object) -> object:
 
 
 class MqttConfig(_Model):
-    host: str = "localhost"
+    host: HostName = "localhost"
     port: int | None = Field(default=None, ge=1, le=65535)
     tls: TlsConfig | None = None
     username: str | None = None
@@ -107,12 +110,32 @@ class MqttConfig(_Model):
         return self
 
     @property
+    def json_prefix(self) -> str:
+        """`json.prefix`, or one naming this gateway, so two gateways never share retained topics."""
+        if self.json_topics.prefix is not None:
+            return self.json_topics.prefix
+        return default_json_prefix(self.sparkplug)
+
+    @property
     def effective_port(self) -> int:
         return self.port or (8883 if self.tls else 1883)
 
     def read_password(self, environ: Mapping[str, str] | None = None) -> str | None:
         """The MQTT password from its environment variable or file; ConfigError if it cannot be had."""
         return read_secret(self.password_env, self.password_file, environ)
+
+
+def gateway_name() -> str:
+    """The host name, as one topic level: the gateway's identity when the config names none."""
+    name = socket.gethostname().replace("+", "_").replace("#", "_").replace("/", "_")
+    return name or "gateway"
+
+
+def default_json_prefix(sparkplug: SparkplugConfig | None) -> str:
+    """focas/<group_id>/<edge_node_id>; without Sparkplug ids (JSON only) focas/<host name>."""
+    if sparkplug is not None:
+        return f"focas/{sparkplug.group_id}/{sparkplug.edge_node_id}"
+    return f"focas/{gateway_name()}"
 
 
 def read_secret(password_env: object, password_file: object, environ: Mapping[str, str] | None = None) -> str | None:

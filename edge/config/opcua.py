@@ -23,7 +23,7 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from edge import ConfigError
-from edge.config.fields import _Model, check_file
+from edge.config.fields import HostName, _Model, check_file
 
 # The endpoint security modes (edge.opcua.settings.SECURITY_MODES maps them to asyncua's policies).
 SecurityMode = Literal["Basic256Sha256-SignAndEncrypt", "Basic256Sha256-Sign", "None"]
@@ -53,7 +53,7 @@ class OpcUaUser(_Model):
 
 class OpcUaConfig(_Model):
     enabled: bool = False
-    host: str = "0.0.0.0"
+    host: HostName = "0.0.0.0"
     port: int = Field(default=4840, ge=1, le=65535)
     path: str = "/focas-edge"
     security: list[SecurityMode] = Field(default_factory=lambda: list(DEFAULT_SECURITY), min_length=1)

@@ -1,6 +1,7 @@
 """The file's top level: Config holds every section (mqtt, machines, alarms, writes, http, spool, opcua,
 state_dir, poll_grid_s) and answers the questions that span sections: the devices of multi-path machines, a
-machine's alarms and effective write policy, the poll grid in use.
+machine's alarms and effective write policy, the poll grid in use, and in a fleet file with `gateways:` which
+gateway this config is for and which machines the others poll.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from typing import Any
 
 from pydantic import ByteSize, Field, PrivateAttr, field_validator, model_validator
 
-from edge.config.fields import Duration, _Model
+from edge.config.fields import Duration, HostName, _Model
 from edge.config.machines import AlarmsConfig, MachineConfig
 from edge.config.mqtt import MqttConfig
 from edge.config.opcua import OpcUaConfig
@@ -23,7 +24,7 @@ DEFAULT_STATE_DIR = Path("/var/lib/focas-edge")
 
 class HttpConfig(_Model):
     enabled: bool = False
-    host: str = "127.0.0.1"
+    host: HostName = "127.0.0.1"
     port: int = Field(default=9108, ge=1, le=65535)
     healthy_share: float = Field(default=0.5, ge=0.0, le=1.0)
 
@@ -49,6 +50,8 @@ class Config(_Model):
 
     _warnings: list[str] = PrivateAttr(default_factory=list)
     _state_dir: Path = PrivateAttr(default=DEFAULT_STATE_DIR)
+    _gateway: str | None = PrivateAttr(default=None)
+    _fleet: dict[str, list[str]] = PrivateAttr(default_factory=dict)
 
     @field_validator("machines")
     @classmethod
@@ -84,11 +87,31 @@ class Config(_Model):
         """
         if self.poll_grid_s is not None:
             return self.poll_grid_s
-        return min(AUTO_POLL_GRID_CAP_S, min(m.poll.periods.fastest_s for m in self.machines) / 2)
+        return min([AUTO_POLL_GRID_CAP_S, *(m.poll.periods.fastest_s / 2 for m in self.machines)])
 
     @property
     def warnings(self) -> list[str]:
         return list(self._warnings)
+
+    @property
+    def gateway(self) -> str | None:
+        """The gateway this config is for, in a fleet file with `gateways:` (None: the file is one gateway's)."""
+        return self._gateway
+
+    @property
+    def fleet(self) -> dict[str, list[str]]:
+        """Every gateway of the fleet file and the machine ids it polls ({} without `gateways:`)."""
+        return {name: list(ids) for name, ids in self._fleet.items()}
+
+    def only_gateway(self, gateway: str, fleet: dict[str, list[str]]) -> Config:
+        """This config as `gateway` runs it: its own machines only (possibly none, while they are moved)."""
+        config = self.model_copy(update={"machines": [m for m in self.machines if m.gateway == gateway]})
+        config._warnings = list(self._warnings)
+        config._gateway = gateway
+        config._fleet = {name: list(ids) for name, ids in fleet.items()}
+        if not config.machines:
+            config._warnings.append(f"gateway {gateway!r} polls no machine: no machine in the file names it")
+        return config
 
     @property
     def resolved_state_dir(self) -> Path:

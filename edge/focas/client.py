@@ -43,7 +43,7 @@ from edge.focas.frame import (
 )
 from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, call_value, first_value, item_value, plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, call_value, first_value, item_value, shared_plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -307,7 +307,7 @@ class FocasClient(CncSession):
         key = (item, self.context)
         plan = self._plans.get(key)
         if plan is None:
-            plan = plan_item(item, self.context, self.path)
+            plan = shared_plan_item(item, self.context, self.path)
             if len(self._plans) >= PLAN_CACHE_SIZE:
                 self._plans.clear()
                 self._shared.clear()

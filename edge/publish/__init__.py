@@ -10,6 +10,7 @@ What lives here (one job per module):
   holding            the Spool interface, and the writer that survives a failing spool
   inbound            CommandSource and the command handlers the command layer installs
   tasks              the one owner of the publisher's background tasks
+  identity           is another gateway using our Sparkplug id or client id? evidence in, ERROR and backoff out
   node, ddata, payload, aliases, bdseq, primary_host   Sparkplug, sans-IO: births, seq, metric encoding, STATE
   json_topics        JSON topic names and bodies, sans-IO
   mqtt, mqtt_wire, credentials, connect_failure        the paho connection driven by the asyncio loop

@@ -37,6 +37,12 @@ class BdSeqCounter:
                 self._last = value
 
     @property
+    def last(self) -> int | None:
+        """The value of the last CONNECT, this run's or (loaded from the store) the previous run's."""
+        with self._lock:
+            return self._last
+
+    @property
     def current(self) -> int | None:
         """The value of the most recent CONNECT attempt (what the Will and the NBIRTH carry)."""
         with self._lock:

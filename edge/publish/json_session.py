@@ -17,6 +17,7 @@ from typing import Any
 
 from edge.publish.forwarding import ForwardingPolicy, HeldBatch
 from edge.publish.holding import SpoolWriter
+from edge.publish.identity import IdentityGuard
 from edge.publish.inbound import CommandHandlers, CommandSource
 from edge.publish.json_topics import JsonTopics, encode
 from edge.publish.link import DeliveryLink
@@ -35,8 +36,9 @@ class JsonSession:
 
     def __init__(self, settings: PublishSettings, *, beside_sparkplug: bool, writer: SpoolWriter,
                  policy: ForwardingPolicy, counters: Counter[str], tasks: BackgroundTasks,
-                 handlers: CommandHandlers) -> None:
+                 handlers: CommandHandlers, guard: IdentityGuard) -> None:
         self.settings = settings
+        self._guard = guard  # a taken-over client id is the same conflict as the Sparkplug one's
         self.topics = JsonTopics(settings.json_prefix)
         self._beside_sparkplug = beside_sparkplug  # then its client id is `<client_id>-json`
         self._counters = counters
@@ -55,9 +57,12 @@ class JsonSession:
             client_id = self.settings.client_id
             if self._beside_sparkplug:
                 client_id = f"{client_id}-json"
+            guard = self._guard
             conn = MqttConnection(self.settings, client_id, before_connect=self._will,
                                   on_connected=self._connected, on_disconnected=self._disconnected,
-                                  on_message=self.handle_message)
+                                  on_message=self.handle_message,
+                                  on_lost=lambda lasted, reason: guard.session_lost(client_id, lasted, reason),
+                                  min_delay=guard.reconnect_floor_s)
             self.link.attach(conn, client_id)
             conn.start()
 

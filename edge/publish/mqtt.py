@@ -10,7 +10,10 @@ What this adds to paho:
 - clean session (3.1.1) / clean start with session expiry 0 (5) on every attempt: paho's MQTT 5 default,
   clean start on the first connect only, would break Sparkplug on reconnect;
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
-  lock-step after a broker restart;
+  lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off);
+- `on_lost(lasted_s, reason)` for a session the broker ended and we did not, told at the next CONNACK and
+  only when that came at the first attempt: a broker that ends a session and takes the client straight back
+  is what a taken-over client id looks like, a broker restart or a network loss is not (edge.publish.identity);
 - keepalive (PINGREQ, and a dead-broker verdict when no PINGRESP comes) from a once-a-second loop timer;
 - awaitable SUBACK / PUBACK;
 - QoS 0 messages without properties (all Sparkplug DATA) are encoded here (edge.publish.mqtt_wire) and
@@ -84,13 +87,21 @@ class MqttConnection:
                  before_connect: Callable[[bool], Will | None],
                  on_connected: Callable[[object], None],
                  on_disconnected: Callable[[], None],
-                 on_message: Callable[[InboundMessage], None]) -> None:
+                 on_message: Callable[[InboundMessage], None],
+                 on_lost: Callable[[float, str], None] | None = None,
+                 min_delay: Callable[[], float] | None = None) -> None:
         self._settings = settings
         self._client_id = client_id
         self._before_connect = before_connect
         self._on_connected = on_connected
         self._on_disconnected = on_disconnected
         self._on_message = on_message
+        self._on_lost = on_lost
+        self._min_delay = min_delay
+        self._connected_at = 0.0  # loop time of the last CONNACK
+        self._dropping = False  # drop_socket() asked for this loss: not the broker's doing
+        self._lost: tuple[float, str] | None = None  # (lasted_s, reason) of a session the broker ended
+        self._back_at_once = False  # the last CONNACK came at the first attempt after a lost session
         self._v5 = settings.protocol == "5"
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread = 0
@@ -185,6 +196,7 @@ class MqttConnection:
         client = self._client
         sock = client.socket() if client is not None else None
         if isinstance(sock, socket.socket):
+            self._dropping = True
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
 
@@ -202,6 +214,10 @@ class MqttConnection:
             delay = self._delay()
             self._attempt += 1
             await asyncio.sleep(delay)
+            # A conflict may have been found meanwhile (the other connection's loss): ask for the floor now.
+            floor = self._min_delay() if self._min_delay is not None else 0.0
+            if floor > delay:
+                await asyncio.sleep(floor - delay)
 
     async def _attempt_connect(self, loop: asyncio.AbstractEventLoop, client: paho.Client) -> bool:
         """One attempt: the blocking TCP/TLS connect and the CONNECT packet in a worker thread, then the
@@ -417,6 +433,7 @@ class MqttConnection:
                                  NOT_AUTHORISED if reason.value in (0x04, 0x05, 0x86, 0x87, 0x8C) else None)
             return  # paho closes the socket; the supervisor retries after the backoff delay
         client.on_log = None  # formatting every paho log line costs on the publish path
+        self._back_at_once = self._attempt == 1
         self._attempt = 0
         # QoS 1 messages of the previous connection would be re-sent by paho now, before our births and
         # with a stale Sparkplug seq; the publisher's spool re-sends their samples instead.
@@ -470,6 +487,12 @@ class MqttConnection:
             return
         self.connected = True
         self.connects += 1
+        self._dropping = False
+        if self._loop is not None:
+            self._connected_at = self._loop.time()
+        lost, self._lost = self._lost, None
+        if lost is not None and self._back_at_once and self._on_lost is not None:
+            self._on_lost(*lost)
         log.info("MQTT connected host=%s port=%s client_id=%s protocol=%s", self._settings.host,
                  self._settings.port, self._client_id, self._settings.protocol)
         recovered = self.trouble.up()
@@ -489,6 +512,8 @@ class MqttConnection:
             log.log(logging.INFO if stopping else logging.WARNING,
                     "MQTT %s host=%s port=%s client_id=%s reason=%s", "disconnected" if stopping else "connection lost",
                     self._settings.host, self._settings.port, self._client_id, reason)
+            if not stopping and not self._dropping and self._loop is not None:
+                self._lost = (self._loop.time() - self._connected_at, reason)
         self._set_disconnected()
 
     def _set_disconnected(self) -> None:

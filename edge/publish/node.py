@@ -120,7 +120,7 @@ class SparkplugNode:
         self.ncmd_topic = f"{base}/NCMD/{edge_node_id}"
         self.dcmd_topic_filter = f"{base}/DCMD/{edge_node_id}/+"
         self.ndeath_topic = f"{base}/NDEATH/{edge_node_id}"
-        self._nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
+        self.nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
         self._ndata_topic = f"{base}/NDATA/{edge_node_id}"
         self._device_topic = f"{base}/{{kind}}/{edge_node_id}/{{device}}"
 
@@ -166,7 +166,7 @@ class SparkplugNode:
         p.metrics.add(name=pl.BDSEQ_METRIC, datatype=DataType.Int64, timestamp=ts, long_value=self._bdseq)
         p.metrics.add(name=pl.REBIRTH_METRIC, datatype=DataType.Boolean, timestamp=ts, boolean_value=False)
         self._add_birth_metrics(p, self._node, ts)
-        out = [Outgoing(self._nbirth_topic, p.SerializeToString())]
+        out = [Outgoing(self.nbirth_topic, p.SerializeToString())]
         self.born = True
         self.holding = False
         for device_id, dev in self._devices.items():

@@ -25,6 +25,7 @@ from typing import Any
 from edge.publish.broker_trouble import BrokerState
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import DroppingSpool, ReplaySpool, Spool, SpoolWriter
+from edge.publish.identity import IdentityGuard
 from edge.publish.inbound import (
     CommandHandlers,
     CommandSource,
@@ -58,15 +59,18 @@ class Publisher:
         self._handlers = CommandHandlers()
         self._writer = SpoolWriter(spool if spool is not None else DroppingSpool(), self._counters)
         policy = forwarding or ForwardingPolicy()
+        self.identity = IdentityGuard(f"Sparkplug id {settings.group_id}/{settings.edge_node_id}"
+                                      if "sparkplug" in settings.formats else f"client id {settings.client_id}")
         # The node always exists (bdSeq, aliases, counters); it connects only with the sparkplug format.
         self._sparkplug = "sparkplug" in settings.formats
         self._spb = SparkplugSession(settings, store, clock, writer=self._writer, policy=policy,
-                                     counters=self._counters, tasks=self._tasks, handlers=self._handlers)
+                                     counters=self._counters, tasks=self._tasks, handlers=self._handlers,
+                                     guard=self.identity)
         self._json: JsonSession | None = None
         if "json" in settings.formats:
             self._json = JsonSession(settings, beside_sparkplug=self._sparkplug, writer=self._writer,
                                      policy=policy, counters=self._counters, tasks=self._tasks,
-                                     handlers=self._handlers)
+                                     handlers=self._handlers, guard=self.identity)
 
     # -- what the owner installs ---------------------------------------------------------------------
 
@@ -239,6 +243,7 @@ class Publisher:
         out["stale_state_ignored"] = spb.host.ignored if spb.host is not None else 0
         out["bdseq_persist_failures"] = spb.bdseq.persist_failures
         out["replay_duplicates_skipped"] = spb.delivered.skipped
+        out["identity_conflicts"] = self.identity.count
         spool = self.spool
         dropped = getattr(spool, "dropped", None)
         if isinstance(dropped, int):

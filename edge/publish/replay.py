@@ -1,5 +1,8 @@
 """Replaying the spool after a reconnect: oldest first, paced, each row as its own historical message(s).
 
+The pace is replay_live_factor (12) times the rate the rows were spooled at, at least replay_rows_per_s: a
+backlog clears in a tenth of the outage that made it, and the live ticks get the loop between chunks.
+
 Runs while live data flows. A batch of rows is acknowledged (deleted from the spool) only after a delivery
 barrier on the same connection (edge.publish.link), so a crash or a lost connection during a replay sends
 the rows again: at-least-once. For Sparkplug, what the host already has (births, live batches spooled
@@ -19,7 +22,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any, Protocol
 
-from edge.publish.holding import ReplaySpool, Spool
+from edge.publish.holding import Format, ReplaySpool, Spool
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import MqttConnection
 from edge.publish.node import Outgoing
@@ -28,6 +31,8 @@ from edge.publish.tasks import BackgroundTasks
 from edge.samples import Sample
 
 log = logging.getLogger(__name__)
+
+FETCH_S = 0.1  # a replay step fetches (and confirms with one barrier) about this many seconds of rows
 
 
 class ReplayTarget(Protocol):
@@ -102,7 +107,9 @@ class Replayer:
         spool = self._spool
         assert isinstance(spool, ReplaySpool)
         link, target, delivered, fmt = self._link, self._target, self._delivered, self._link.fmt
-        pause = 1.0 / link.policy.replay_rows_per_s
+        rate = self._rate(spool, fmt)
+        chunk = link.policy.replay_batch
+        fetch = max(chunk, int(rate * FETCH_S))  # rows per query and per barrier
         started = time.monotonic()
         sent_rows = 0
 
@@ -111,13 +118,14 @@ class Replayer:
                     and not self._tasks.stopping and target.replay_ready())
 
         while current():
-            entries = spool.oldest(fmt, link.policy.replay_batch, target.replay_devices())
+            entries = spool.oldest(fmt, fetch, target.replay_devices())
             if not entries:
                 if self._again:
                     self._again = False
                     continue
                 break
             done: list[int] = []
+            paced_from, paced = time.monotonic(), 0
             for entry in entries:
                 if not target.replay_accepts(entry.device_id):
                     continue  # went offline since the query: its rows wait for its next DBIRTH
@@ -134,7 +142,12 @@ class Replayer:
                     self._counters["replayed_messages"] += 1
                 if delivered is not None and messages:
                     delivered.record(entry.device_id, samples)
-                await asyncio.sleep(pause)  # per row: a tick's worth of one machine
+                paced += 1
+                if paced >= chunk:  # yield to live ticks, holding the rate
+                    await asyncio.sleep(max(0.0, paced / rate - (time.monotonic() - paced_from)))
+                    paced_from, paced = time.monotonic(), 0
+            if paced:
+                await asyncio.sleep(max(0.0, paced / rate - (time.monotonic() - paced_from)))
             if not current() or not await link.barrier(conn):
                 return
             spool.ack(done)
@@ -151,6 +164,14 @@ class Replayer:
         if sent_rows:
             log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
                      time.monotonic() - started, left)
+
+    def _rate(self, spool: ReplaySpool, fmt: Format) -> float:
+        """Rows per second: the policy's least rate, or replay_live_factor times the rate the rows were
+        spooled at (what the fleet produced while the broker was away), whichever is higher."""
+        policy = self._link.policy
+        spooled = getattr(spool, "spooled_rate", None)
+        live = spooled(fmt) if spooled is not None else None
+        return max(policy.replay_rows_per_s, policy.replay_live_factor * live) if live else policy.replay_rows_per_s
 
     def _historical_messages(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
         if not samples:

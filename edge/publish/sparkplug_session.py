@@ -10,6 +10,9 @@ Rules this module keeps:
    `rebirth_min_interval_s`, later requests in that window coalesce.
 5. DATA goes out live only while born, the device is online and the link is not suspect; otherwise it is
    held (edge.publish.link) and replayed after the births, without what the births already carried.
+6. Our own NBIRTH and NDEATH topics are watched: another session's birth or death there, or the broker
+   taking our client id, is an identity conflict (edge.publish.identity): one ERROR, then reconnects and
+   rebirths at most once a minute while it lasts.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from edge.publish.aliases import AliasMap
 from edge.publish.bdseq import BdSeqCounter
 from edge.publish.forwarding import ForwardingPolicy, HeldBatch
 from edge.publish.holding import SpoolWriter
+from edge.publish.identity import IdentityGuard, bdseq_of
 from edge.publish.inbound import CommandHandlers, CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will
@@ -45,8 +49,9 @@ class SparkplugSession:
 
     def __init__(self, settings: PublishSettings, store: StateStore, clock: Callable[[], int], *,
                  writer: SpoolWriter, policy: ForwardingPolicy, counters: Counter[str], tasks: BackgroundTasks,
-                 handlers: CommandHandlers) -> None:
+                 handlers: CommandHandlers, guard: IdentityGuard) -> None:
         self.settings = settings
+        self.guard = guard
         self._counters = counters
         self._tasks = tasks
         self._handlers = handlers
@@ -55,6 +60,8 @@ class SparkplugSession:
         self.node_metrics_source: Callable[[], Sequence[Sample]] | None = None
         self.delivered = DeliveredValues()  # what this Sparkplug connection sent: replay skips it
         self.bdseq = BdSeqCounter(store)
+        if self.bdseq.last is not None:
+            guard.used_bdseq(self.bdseq.last)  # the previous run's Will may still come
         self.node = SparkplugNode(settings.group_id, settings.edge_node_id, AliasMap(store), clock)
         self.host = PrimaryHost(settings.primary_host_id) if settings.primary_host_id else None
         self.link = DeliveryLink("sparkplug", writer, counters, policy, tasks, self.delivered)
@@ -68,9 +75,12 @@ class SparkplugSession:
     def start(self) -> None:
         if self.link.conn is None:
             client_id = self.settings.client_id
+            guard = self.guard
             conn = MqttConnection(self.settings, client_id, before_connect=self._will,
                                   on_connected=self._connected, on_disconnected=self._disconnected,
-                                  on_message=self.handle_message)
+                                  on_message=self.handle_message,
+                                  on_lost=lambda lasted, reason: guard.session_lost(client_id, lasted, reason),
+                                  min_delay=guard.reconnect_floor_s)
             self.link.attach(conn, client_id)
             conn.start()
 
@@ -142,6 +152,7 @@ class SparkplugSession:
     def _will(self, previous_unsent: bool) -> Will:
         """Before every CONNECT (in the connect worker thread): next bdSeq (persisted) in a fresh NDEATH Will."""
         bdseq = self.bdseq.next_for_connect(previous_unsent)
+        self.guard.used_bdseq(bdseq)
         will = self.node.will(bdseq)
         return Will(will.topic, will.payload, qos=will.qos, retain=will.retain, tag=bdseq)
 
@@ -172,8 +183,21 @@ class SparkplugSession:
             return
         if session != self.link.session:
             return
+        await self._watch_identity(conn)
+        if session != self.link.session:
+            return
         self._subscribed = True
         self._maybe_birth()
+
+    async def _watch_identity(self, conn: MqttConnection) -> None:
+        """Subscribe to our own NBIRTH/NDEATH (another session's there is a conflict); a broker that refuses
+        it (an ACL) costs the detection, not the session."""
+        try:
+            await conn.subscribe([(self.node.nbirth_topic, 0), (self.node.ndeath_topic, 0)],
+                                 timeout=self.settings.connect_timeout_s)
+        except MqttUnavailable as exc:
+            log.warning("cannot watch this node's own NBIRTH/NDEATH, identity conflicts are detected by "
+                        "session take-overs only error=%s", exc)
 
     def _maybe_birth(self) -> None:
         conn = self.link.conn
@@ -204,6 +228,12 @@ class SparkplugSession:
     def handle_message(self, msg: InboundMessage) -> None:
         if self.host is not None and msg.topic == self.host.topic:
             self._state_message(msg)
+            return
+        if msg.topic == self.node.nbirth_topic:
+            self.guard.nbirth_seen(msg.payload, bdseq_of(msg.payload), self.node.bdseq)
+            return
+        if msg.topic == self.node.ndeath_topic:
+            self.guard.ndeath_seen(bdseq_of(msg.payload), self.node.bdseq)
             return
         writes: list[tuple[str, object]] = []
         refused: list[RefusedMetric] = []
@@ -261,7 +291,8 @@ class SparkplugSession:
             return
         if not self.node.request_rebirth():
             return  # not born yet: the session's own births are still to come
-        delay = max(0.0, self._last_rebirth + self.settings.rebirth_min_interval_s - time.monotonic())
+        interval = self.guard.rebirth_interval_s(self.settings.rebirth_min_interval_s)
+        delay = max(0.0, self._last_rebirth + interval - time.monotonic())
         self._rebirth_handle = asyncio.get_running_loop().call_later(delay, self._rebirth)
 
     def _rebirth(self) -> None:
@@ -276,7 +307,11 @@ class SparkplugSession:
     def _send_births(self) -> None:
         """NBIRTH and the DBIRTHs; what they carry is recorded so the replay does not repeat it."""
         carried = self.node.birth_samples()
-        if self.link.send(self.link.conn, self._births()):
+        births = self._births()
+        for m in births:
+            if m.topic == self.node.nbirth_topic:
+                self.guard.sent_birth(m.payload)  # its echo on our subscription is ours
+        if self.link.send(self.link.conn, births):
             for device_id, samples in carried:
                 self.delivered.record(device_id, samples)
 

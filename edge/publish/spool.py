@@ -163,6 +163,15 @@ class DiskSpool:
                 return sum(self._rows.values()) - len(self._acked)
             return self._rows[fmt] - sum(1 for f in self._acked.values() if f == fmt)
 
+    def spooled_rate(self, fmt: Format) -> float | None:
+        """Rows per second at which the waiting rows of one format were spooled (None under 2 rows or 1 s)."""
+        with self._lock:
+            count, first, last = self._conn().execute(
+                "SELECT COUNT(*), MIN(created), MAX(created) FROM spool WHERE fmt = ?", (fmt,)).fetchone()
+        if count < 2 or last - first < 1.0:
+            return None
+        return float(count / (last - first))
+
     def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
         """Up to `limit` rows of one format, oldest first; only those `devices` if given.
 

@@ -46,6 +46,8 @@ def acl_topics(config: Config) -> AclTopics:
         writes += [node.format(kind) + "/+" for kind in ("DBIRTH", "DDATA", "DDEATH")]
         commands += [node.format("NCMD"), node.format("DCMD") + "/+"]
         reads += list(commands)
+        # Its own births and deaths: another session's there is an identity conflict (edge.publish.identity).
+        reads += [node.format("NBIRTH"), node.format("NDEATH")]
         if settings.primary_host_id:
             reads.append(f"{SPARKPLUG}/STATE/{settings.primary_host_id}")
         published.append(f"{SPARKPLUG}/{settings.group_id}/#")

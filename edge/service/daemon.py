@@ -2,7 +2,8 @@
 
 SIGTERM/SIGINT: stop polling, DDEATH every machine, NDEATH, DISCONNECT, close PDUs to the CNCs, exit 0.
 SIGHUP: reload the config without dropping the broker session; machines added, removed or changed get
-their DBIRTH/DDEATH. The systemd watchdog is pinged only while every poll loop makes progress.
+their DBIRTH/DDEATH (in a fleet file with `gateways:`, a machine moved to another gateway is one removed).
+The systemd watchdog is pinged only while every poll loop makes progress.
 """
 
 from __future__ import annotations
@@ -19,11 +20,12 @@ from pathlib import Path
 from edge import ConfigError, __version__
 from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
 from edge.command import CommandService
-from edge.config import Config, MachineConfig, listen_port, load_config
+from edge.config import GATEWAY_ENV, Config, MachineConfig, listen_port, load_config
 from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
+from edge.service.fd_limit import ensure_fd_limit, fds_needed
 from edge.service.gc_tuning import tune_collector
 from edge.service.opcua_output import opcua_output
 from edge.service.outputs import Outputs
@@ -36,6 +38,9 @@ from edge.service.status_http import StatusServer
 log = logging.getLogger(__name__)
 
 NODE_METRICS_PERIOD_S = 5.0
+# Machines started per second at start-up: each start (connect, static reads, plan, DBIRTH) costs the loop
+# milliseconds, and 1,000 of them in the same second kept answers waiting past the request timeout.
+STARTS_PER_S = 200.0
 SYSTEMD_STATUS_PERIOD_S = 1.0
 
 
@@ -111,8 +116,10 @@ class Daemon:
         self.publisher.set_node_metrics(self.node_metrics())
         await self.publisher.start()
         await self._start_opcua()
-        for machine in self.config.devices():
-            self._start_machine(machine)
+        devices = self.config.devices()
+        spread = max(1.0, len(devices) / STARTS_PER_S)  # a fleet's first connects spread, not in one burst
+        for machine in devices:
+            self._start_machine(machine, spread)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
         background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
@@ -203,9 +210,9 @@ class Daemon:
             loop.add_signal_handler(signal.SIGHUP, self.request_reload)
 
     # ---- machines ------------------------------------------------------------------------------------
-    def _start_machine(self, machine: MachineConfig) -> None:
+    def _start_machine(self, machine: MachineConfig, spread_s: float = 1.0) -> None:
         poller = MachinePoller(machine_settings(self.config, machine), self.outputs, self.state_dir,
-                               self.session_factory, grid=self.tick_grid)
+                               self.session_factory, jitter_s=spread_s, grid=self.tick_grid)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
         task.add_done_callback(self._poller_done)
@@ -234,8 +241,8 @@ class Daemon:
         if self.config_path is None:
             return
         self.notifier.reloading()
-        try:
-            new = load_config(self.config_path)
+        try:  # in a thread: parsing 1,000 machines takes seconds, and the poll loops must keep ticking meanwhile
+            new = await asyncio.to_thread(load_config, self.config_path, gateway=self.config.gateway)
         except ConfigError as exc:
             log.error("reload refused, keeping the running config: %s", exc)
             self.notifier.ready("reload refused: bad config")
@@ -256,6 +263,10 @@ class Daemon:
                                                      self.config.alarms_for(old[i]) != new.alarms_for(fresh[i]))]
         removed = [i for i in old if i not in fresh]
         added = [i for i in fresh if i not in old]
+        owners = {machine: gateway for gateway, machines in new.fleet.items() for machine in machines}
+        for machine_id in removed:
+            if machine_id in owners:
+                log.info("reload: machine %s moved to gateway %s", machine_id, owners[machine_id])
         self.config = new
         self.commands.reconfigure(command_settings(new))
         for machine_id in removed + changed:
@@ -351,13 +362,20 @@ def _stale_limit(machine: MachineSettings) -> float:
         periods.status, periods.macros, periods.pmc)
 
 
-def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = None) -> int:
-    config = load_config(config_path)
+def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = None,
+               gateway: str | None = None) -> int:
+    """`gateway`: which gateway of a fleet file with `gateways:` this process is (kept across reloads)."""
+    config = load_config(config_path, gateway=gateway)
+    if config.fleet and gateway is None:  # without a name, load_config answers with an overview, not a box
+        raise ConfigError([f"the file lists gateways ({', '.join(config.fleet)}): say which one this is with "
+                           f"--gateway NAME or {GATEWAY_ENV}=NAME"], str(config_path))
     for warning in config.warnings:
         log.warning("config: %s", warning)
     unusable = state_dir_problem(config.resolved_state_dir)
     if unusable is not None:
         raise ConfigError([unusable], str(config_path))
+    devices = config.devices()
+    ensure_fd_limit(fds_needed(len(devices), sum(1 for d in devices if d.fwlib_host)))
 
     async def main() -> int:
         daemon = Daemon(config, config_path)

@@ -155,6 +155,10 @@ class DaemonCollector:
             messages.add_metric([outcome], float(counters.pop(outcome, 0)))
         yield messages
         counters.pop("spool_rows", None)
+        conflicts = CounterMetricFamily("focas_edge_identity_conflicts", "evidence that another gateway uses this "
+                                        "gateway's Sparkplug id or client id on the broker (edge.publish.identity)")
+        conflicts.add_metric([], float(counters.pop("identity_conflicts", 0)))
+        yield conflicts
         for name, help_text in PUBLISHER_GAUGES.items():
             gauge = GaugeMetricFamily(f"focas_edge_{name}", help_text)
             gauge.add_metric([], float(counters.pop(name, 0)))

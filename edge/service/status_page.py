@@ -120,6 +120,24 @@ def failing_text(failing: Any) -> str:
     return f"{failing['function']} failing since {failing['since']} ({failing['errors']} errors): {failing['error']}"
 
 
+def identity_conflict(publisher: Any) -> dict[str, Any] | None:
+    """Another gateway on the broker with this one's identity (edge.publish.identity), while it lasts."""
+    guard = getattr(publisher, "identity", None)
+    conflict = guard.conflict if guard is not None else None
+    if conflict is None:
+        return None
+    return {"identity": conflict.identity, "seen": conflict.seen, "since": _iso(conflict.since),
+            "count": conflict.count}
+
+
+def conflict_text(conflict: Mapping[str, Any] | None) -> str:
+    """The page's line for it, HTML-escaped (the script writes the same text)."""
+    if conflict is None:
+        return "none"
+    return html.escape(f"CONFLICT since {conflict['since']}: another gateway uses {conflict['identity']} "
+                       f"({conflict['count']} times; last: {conflict['seen']})")
+
+
 def status_document(daemon: DaemonView, meter: RateMeter) -> dict[str, Any]:
     """What the page shows, as JSON-ready data."""
     now, wall_now = time.monotonic(), time.time()
@@ -137,6 +155,7 @@ def status_document(daemon: DaemonView, meter: RateMeter) -> dict[str, Any]:
             "writes_enabled": bool(config.writes.enabled) if config is not None else False,
             "machines": len(machines),
             "machines_connected": sum(1 for m in machines if m["connected"]),
+            "identity_conflict": identity_conflict(daemon.publisher),
         },
         "machines": machines,
     }
@@ -167,6 +186,10 @@ function draw(doc) {
   document.getElementById("spool").textContent = g.spool_depth;
   document.getElementById("writes").textContent = g.writes_enabled ? "on" : "off";
   document.getElementById("count").textContent = g.machines_connected + " of " + g.machines + " connected";
+  const c = g.identity_conflict, identity = document.getElementById("identity-conflict");
+  identity.textContent = c ? "CONFLICT since " + c.since + ": another gateway uses " + c.identity + " ("
+    + c.count + " times; last: " + c.seen + ")" : "none";
+  identity.className = c ? "down" : "muted";
   const body = document.getElementById("machines");
   body.replaceChildren();
   for (const m of doc.machines) {
@@ -242,6 +265,8 @@ def render_page(doc: Mapping[str, Any]) -> str:
     """The whole page, filled in from `doc` (the script then keeps it current)."""
     g = doc["gateway"]
     rows = "\n".join(_row(m) for m in doc["machines"])
+    conflict = g["identity_conflict"]
+    conflict_class = "down" if conflict else "muted"
     broker = "<span id=\"broker\" class=\"{}\">{}</span>".format(
         "up" if g["broker_connected"] else "down", "connected" if g["broker_connected"] else "DOWN")
     return f"""<!doctype html>
@@ -255,6 +280,7 @@ def render_page(doc: Mapping[str, Any]) -> str:
 <dt>spool depth</dt><dd id="spool">{g["spool_depth"]}</dd>
 <dt>writes</dt><dd id="writes">{"on" if g["writes_enabled"] else "off"}</dd>
 <dt>machines</dt><dd id="count">{g["machines_connected"]} of {g["machines"]} connected</dd>
+<dt>identity conflict</dt><dd id="identity-conflict" class="{conflict_class}">{conflict_text(conflict)}</dd>
 </dl>
 {render_gateway_block(g["identity"], g["broker"])}
 <table><thead><tr>{"".join(f"<th>{c}</th>" for c in _COLUMNS)}</tr></thead>

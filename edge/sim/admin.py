@@ -10,7 +10,7 @@
                                     "pmc": {"R100": [1, 2]}, "param_write_enable": true,
                                     "clock_offset": 3600, "timezone": "Europe/Berlin",
                                     "raise_alarm": {"number": 1004, "type": 15, "axis": 0, "message": "..."},
-                                    "clear_alarms": true, "emergency": false}
+                                    "clear_alarms": true, "emergency": false, "feed_hold": true}
 
 Every answer is JSON; errors are {"error": "..."} with 400 (bad request) or 404 (no such machine/path).
 Runs on the fleet's event loop: state and faults change between requests, never during one.
@@ -199,6 +199,7 @@ _STATE_ACTIONS: dict[str, Callable[[Machine, Any], None]] = {
     "clock_offset": lambda m, v: setattr(m.state, "clock_offset", float(v)),
     "timezone": lambda m, v: setattr(m.state, "timezone", str(v)),
     "emergency": lambda m, v: m.state.set_emergency(bool(v)),
+    "feed_hold": lambda m, v: m.state.set_feed_hold(bool(v)),
     "macros": lambda m, v: _set_macros(m, dict(v)),
     "params": lambda m, v: _set_params(m, dict(v)),
     "pmc": lambda m, v: _set_pmc(m, dict(v)),

@@ -65,6 +65,7 @@ from edge.sim.state_program import (
     MOTION_DWELL,
     MOTION_MOVING,
     MOTION_NONE,
+    RUN_HOLD,
     RUN_RESET,
     RUN_START,
     CycleSpec,
@@ -112,6 +113,7 @@ class MachineState:
         # so a subscriber can compare a published source timestamp with the clock it claims to be.
         self.clock_macro: int | None = None
         self.emergency = False
+        self.feed_hold = False  # the operator's FEED HOLD button (admin `feed_hold`): run HOLD until released
         self.mode = AUT_MEM
         self._alarms.seed_history(self._t0, self.seed)
         self._processed = self._phase
@@ -234,12 +236,15 @@ class MachineState:
         return self.profile.sysinfo
 
     def status(self) -> StatInfo:
-        """cnc_statinfo: MEM + STaRT + MoTioN while cutting; reset between parts; ALarM while one is on."""
+        """cnc_statinfo: MEM + STaRT + MoTioN while cutting; reset between parts; ALarM while one is on; HOLD
+        while feed hold is pressed (the cycle's clock runs on: a held machine still counts its parts)."""
         with self._lock:
             cutting, into = self._cycle.phase_at(self._cycle_time())
             alarm = 1 if self._alarms.any_active() else 0
             if self.emergency:
                 return StatInfo(self.mode, RUN_RESET, MOTION_NONE, 0, 1, alarm, 0)
+            if self.feed_hold:
+                return StatInfo(self.mode, RUN_HOLD, MOTION_NONE, 0, 0, alarm, 0)
             if not cutting:
                 return StatInfo(self.mode, RUN_RESET, MOTION_NONE, 0, 0, alarm, 0)
             tool_change = into < 1.0  # M06 waiting for FIN at the start of the program
@@ -251,6 +256,11 @@ class MachineState:
         with self._lock:
             self.emergency = on
             self._refresh_signals(self._processed)
+
+    def set_feed_hold(self, on: bool) -> None:
+        """Press (True) or release (False) feed hold: the status word says HOLD while it is pressed."""
+        with self._lock:
+            self.feed_hold = on
 
     def set_param_write_enable(self, on: bool) -> None:
         """The PWE switch (setting screen): parameter writes answer EW_PASSWD while it is off."""

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration
 
 REPO = Path(__file__).resolve().parents[2]
 LIVE_DATA = re.compile(r"^DDATA  \S+/\S+ seq=\d+  \S+ = .+ @\d\d:\d\d:\d\d\.\d{3}$")
-LIVE_JSON = re.compile(r"^JSON   focas/[\w-]+/state/\S+ = .* @\d\d:\d\d:\d\d\.\d{3}$")
+LIVE_JSON = re.compile(r"^JSON   focas/demo-plant/gateway-1/[\w-]+/state/\S+ = .* @\d\d:\d\d:\d\d\.\d{3}$")
 # mill-1   30i-BM   connected  START  O1234  S 6140  parts 0  alarms: none
 DEVICES = {"mill-1", "lathe-1", "lathe-1-path2", "mill-2"}  # the lathe's second path is a device of its own
 MACHINE_LINE = re.compile(r"^(mill-1|lathe-1|lathe-1-path2|mill-2) +(\S+) +connected  (\S+)  O(\S+)  S (\S+)  "

@@ -34,7 +34,7 @@ from tests.integration.test_status_page import SCREENSHOT, chromium, run_browser
 
 pytestmark = pytest.mark.integration
 
-STATE = "focas/m1/state/"
+STATE = "focas/plant/gw/m1/state/"  # config_text names no prefix: the default names the gateway
 
 
 async def status_json(http_port: int) -> dict[str, Any]:

@@ -3,7 +3,11 @@ polls what each control answered, no more."""
 
 from __future__ import annotations
 
+import contextlib
+import socketserver
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -66,11 +70,56 @@ def test_an_unreachable_cnc_is_a_comment_and_exit_1(tmp_path: Path, capsys: pyte
     assert [m.id for m in load_config(out, environ={}).machines] == [f"cnc-127-0-0-1-{fleet[0].port}"]
 
 
+class _Banner(socketserver.BaseRequestHandler):
+    """An SSH server's greeting: it speaks first."""
+
+    def handle(self) -> None:
+        self.request.sendall(b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n")
+        self.request.recv(64)
+
+
+class _Http(socketserver.BaseRequestHandler):
+    """A web server: silent until spoken to, then not FOCAS."""
+
+    def handle(self) -> None:
+        self.request.recv(64)
+        self.request.sendall(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+
+
+@contextlib.contextmanager
+def serving(handler: type[socketserver.BaseRequestHandler]) -> Iterator[int]:
+    with socketserver.ThreadingTCPServer(("127.0.0.1", 0), handler) as server:
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        try:
+            yield server.server_address[1]
+        finally:
+            server.shutdown()
+            thread.join()
+
+
+def test_an_address_that_answers_but_not_as_focas_is_a_comment_saying_what_answered(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "edge.yaml"
+    with FleetThread(Fleet([MachineSpec(profile="16i")], base_port=0)) as fleet, serving(_Banner) as ssh, \
+            serving(_Http) as web:
+        code = main(["init", f"127.0.0.1:{fleet[0].port}", f"127.0.0.1:{ssh}", f"127.0.0.1:{web}", "--timeout", "2",
+                     "-o", str(out)])
+    assert code == EXIT_FAILURE
+    text = out.read_text()
+    assert f"  # 127.0.0.1:{ssh} answered but not FOCAS: it sent 'SSH-2.0-OpenSSH_9.2p1 Debian-2'\n" in text
+    assert f"  # 127.0.0.1:{web} answered but not FOCAS: the FOCAS hello got: " in text and "('HTTP')" in text
+    assert "NOT REACHED" not in text
+    assert f"127.0.0.1:{ssh} answered but not FOCAS" in capsys.readouterr().err
+    assert [m.id for m in load_config(out, environ={}).machines] == [f"cnc-127-0-0-1-{fleet[0].port}"]
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--names", "a"], "--names has 1 name(s) for 2 address(es)"),
     (["--names", "a,A"], "machine id(s) given twice (ids ignore case): A, a"),
     (["--names", "a,b/c"], "'b/c' contains /"),
     (["--group", "x#"], "'x#' contains #"),
+    (["--broker", "mqtt..plant"], "mqtt..plant: 'mqtt..plant' is not a valid host name"),
 ])
 def test_bad_usage_is_refused_before_anything_is_probed(extra: list[str], message: str, tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
@@ -112,6 +161,14 @@ def test_init_writes_the_bundled_units_out_too_running_this_installation(
         assert "use --force" in capsys.readouterr().err
 
 
+def test_a_mistyped_cnc_address_is_refused_before_anything_is_probed(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["init", "192.168.10.577", "-o", str(tmp_path / "x.yaml")]) == EXIT_USAGE
+    assert "192.168.10.577: '192.168.10.577' is not a valid IPv4 address (577 is more than 255)" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "x.yaml").exists()
+
+
 def test_init_acl_writes_the_broker_acl_beside_the_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "edge.yaml"
     with FleetThread(Fleet([MachineSpec(profile="30i")], base_port=0)) as fleet:
@@ -126,7 +183,7 @@ def test_init_acl_writes_the_broker_acl_beside_the_config(tmp_path: Path, capsys
     assert not any("CMD" in line or line.endswith("/cmd") for line in gateway if line.startswith("topic write"))
     commands = [line for line in mes if line.startswith("topic write")]
     assert commands == ["topic write spBv1.0/site/NCMD/gw-7", "topic write spBv1.0/site/DCMD/gw-7/+",
-                        "topic write focas/+/cmd"]
+                        "topic write focas/site/gw-7/+/cmd"]  # the default JSON prefix names the gateway
     # The file exists now: a second run without --force refuses to overwrite it.
     assert main(["init", "127.0.0.1:1", "-o", str(tmp_path / "other.yaml"), "--acl",
                  str(tmp_path / "mosquitto.acl")]) == EXIT_USAGE

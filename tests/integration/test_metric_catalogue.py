@@ -37,7 +37,7 @@ class Row:
     regex: re.Pattern[str]
 
 
-PLACEHOLDERS = {"<n>": r"\d+", "<area>": "[A-Z]", "<axis>": "[^/.]+"}
+PLACEHOLDERS = {"<n>": r"\d+", "<area>": "[A-Z]", "<axis>": "[^/.]+", "<state>": "[A-Z_]+"}
 
 
 def catalogue(section: str) -> list[Row]:

@@ -132,7 +132,8 @@ async def test_sigterm_sends_ddeaths_then_ndeath_closes_cnc_sessions_and_exits_0
     assert not any(kind.startswith("D") for kind, _ in kinds[ndeath + 1:]), "nothing after NDEATH"
     (nbirth,) = observer.of("NBIRTH")
     assert bdseq_of(observer.of("NDEATH")[0]) == bdseq_of(nbirth)
-    online = [m.payload.decode() for m in observer.on("focas/m1/online")]
+    # No json prefix in this config: the default names the gateway (group plant, node gw).
+    online = [m.payload.decode() for m in observer.on("focas/plant/gw/m1/online")]
     assert online[-1] == "offline"
 
 

@@ -83,7 +83,7 @@ async def test_status_json_and_the_server_rendered_page(mosquitto: Mosquitto, tm
         doc = json.loads(body)
         gateway = {k: v for k, v in doc["gateway"].items() if k not in ("identity", "broker")}
         assert gateway == {"broker_connected": True, "spool_depth": 0, "writes_enabled": False,
-                           "machines": 2, "machines_connected": 2}
+                           "machines": 2, "machines_connected": 2, "identity_conflict": None}
         m1, m2 = doc["machines"]
         assert (m1["id"], m1["connected"], m1["series"], m1["planned_hz"]) == ("m1", True, "30i-BM", 4.0)
         assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d", m1["since"])  # local, offset
@@ -122,5 +122,6 @@ async def test_chromium_shows_what_the_script_fetched(mosquitto: Mosquitto, tmp_
         m2 = re.search(r'<tr id="machine-m2">(.*?)</tr>', dom, re.S)
         assert m2 is not None and "ReadMacros" in m2.group(1)
         assert '<span id="broker" class="up">connected</span>' in dom
+        assert '<dd id="identity-conflict" class="muted">none</dd>' in dom  # no other gateway with this identity
         if SCREENSHOT:
             await run_browser(binary, url, f"--screenshot={SCREENSHOT}", "--window-size=1400,640")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import codec, fleet, floor, roundtrip, writes
+from bench import codec, fleet, floor, outage, reload, roundtrip, writes
 from bench.__main__ import main
 from bench.report import percentile
 from bench.simproc import stamp_latency, stamp_value
@@ -53,6 +53,21 @@ def test_fleet_measures_cpu_cycles_and_latency() -> None:
     assert row["cpu_us_per_cycle"] > 0 and not math.isnan(row["sample_p50_ms"])
     assert row["achieved_pct"] > 0 and row["planned_per_s"] == 20 and row["overruns"] >= 0
     assert row["changes_seen"] > 0 and not math.isnan(row["change_p99_ms"])  # a simulator change reached a subscriber
+
+
+@needs_broker
+def test_reload_measures_births_and_a_machine_added_without_disturbing_the_others() -> None:
+    row = reload.run_reload(3, period_s=0.5, watch_s=1.5)
+    assert 0 < row["all_born_s"] < 60 and 0 < row["added_born_s"] < 20
+    assert (row["other_dbirths"], row["ddeaths"], row["seq_gaps"], row["silent_machines"]) == (0, 0, 0, 0)
+
+
+@needs_broker
+def test_outage_counts_losses_replay_and_descriptors(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(outage, "WARMUP_S", 2.0)
+    row = outage.run_outage(2, period_s=0.5, outage_s=3.0, after_s=1.0)
+    assert row["lost"] == 0 and row["collected"] > 0 and row["daemon_exit"] == 0
+    assert row["spooled_rows"] > 0 and row["backlog_values"] > 0 and row["fds_after"] > 0
 
 
 def test_floor_measures_each_level_against_the_fleet_simulators() -> None:

@@ -126,7 +126,7 @@ async def run_demo(config_path: Path, duration: float | None, raw: bool = False)
         where = machine.endpoint + (f" + library host {machine.fwlib_host}" if machine.fwlib_host else "")
         paths = f"  {machine.paths} paths" if machine.paths > 1 else ""
         print(f"== simulated CNC {machine.id:<10} profile {sim.state.profile.name:<5} at {where}{paths}", flush=True)
-    prefix = mqtt.json_topics.prefix
+    prefix = mqtt.json_prefix
     group = mqtt.sparkplug.group_id if mqtt.sparkplug else "+"
     print(f"== subscribe: mosquitto_sub -h {mqtt.host} -p {port} -t 'spBv1.0/{group}/#' -t '{prefix}/#' -v",
           flush=True)

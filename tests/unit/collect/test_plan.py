@@ -12,6 +12,7 @@ from edge.collect.plan import (
     StaticInfo,
     axis_unit,
     metric_values,
+    shared_value_extractor,
     value_extractor,
 )
 from edge.config import parse_config
@@ -185,3 +186,16 @@ def test_extractors_coerce_each_value_to_its_metric_type() -> None:
     assert bits([0b10000101]) == [True, False, True, False, False, False, False, True]
     params = value_extractor(_read(it.ReadParams(6711, 6711), MetricType.INT32))
     assert params([ParamRecord(6711, 0, 2, (12.0,))]) == [12]
+
+
+def test_machines_polling_alike_share_reads_and_extractors_but_each_session_gets_its_own_plan() -> None:
+    config = parse_config(CONFIG, "t", {})
+    first = poll_settings(config.machines[0].poll, config.alarms)
+    second = poll_settings(parse_config(CONFIG, "t", {}).machines[0].poll, config.alarms)  # equal, not the same
+    a, b = MachinePlan.build(first, STATIC), MachinePlan.build(second, STATIC)
+    assert a is not b, "the poller tells sessions apart by the plan's identity"
+    assert a.reads is b.reads and a.metrics()[0] is b.metrics()[0]
+    assert MachinePlan.build(first, StaticInfo(axis_names=("X",))).reads is not a.reads, "other axes, other reads"
+    read = a.reads_for([Group.MACROS])[0]
+    assert shared_value_extractor(read) is shared_value_extractor(b.reads_for([Group.MACROS])[0])
+    assert shared_value_extractor(read)([1.0, 2.0, 3.0]) == value_extractor(read)([1.0, 2.0, 3.0])

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from tests.unit.config.minimal import MINIMAL, parse, problems_of
 
 
@@ -56,3 +58,23 @@ def test_tls_files_must_exist(tmp_path: Path) -> None:
     assert config.mqtt.tls is not None and config.mqtt.effective_port == 8883
     problems = problems_of(MINIMAL.replace("host: broker", f"host: broker\n  tls: {{key_file: {ca}}}"))
     assert problems == ["mqtt.tls.key_file: a client key needs cert_file too (line 4)"]
+
+
+def test_default_json_prefix_names_the_gateway_so_two_gateways_never_share_retained_topics() -> None:
+    from edge.service.settings import publish_settings
+
+    first = parse(MINIMAL.replace("edge_node_id: n", "edge_node_id: line1"))
+    second = parse(MINIMAL.replace("edge_node_id: n", "edge_node_id: line2"))
+    assert first.mqtt.json_prefix == "focas/g/line1" and second.mqtt.json_prefix == "focas/g/line2"
+    assert publish_settings(first).json_prefix == "focas/g/line1"
+    old = parse(MINIMAL.replace("host: broker", "host: broker\n  json: {prefix: focas}"))
+    assert old.mqtt.json_prefix == "focas"  # the migration: today's topics, set explicitly
+
+
+def test_json_only_without_ids_is_named_by_the_host(monkeypatch: pytest.MonkeyPatch) -> None:
+    from edge.service.settings import publish_settings
+
+    monkeypatch.setattr("socket.gethostname", lambda: "cell-7")
+    config = parse(MINIMAL.replace("  sparkplug: {group_id: g, edge_node_id: n}\n", "  formats: [json]\n"))
+    assert config.mqtt.json_prefix == "focas/cell-7"
+    assert publish_settings(config).client_id == "focas-edge-cell-7"

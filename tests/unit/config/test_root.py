@@ -25,7 +25,7 @@ def test_minimal_config_gets_the_documented_defaults() -> None:
     assert config.http.enabled is False and config.http.host == "127.0.0.1"
     assert config.mqtt.protocol == "3.1.1" and config.mqtt.effective_port == 1883
     assert config.mqtt.formats == ["sparkplug", "json"]
-    assert config.mqtt.json_topics.prefix == "focas"
+    assert config.mqtt.json_prefix == "focas/g/n"  # the gateway's identity (docs/topics.md)
     assert config.resolved_state_dir == DEFAULT_STATE_DIR
     assert config.warnings == []
 

@@ -181,6 +181,19 @@ def test_forwarding_policy_validates() -> None:
         ForwardingPolicy(probe_timeout_s=0)
 
 
+def test_the_rate_rows_were_spooled_at_is_what_a_replay_paces_from(tmp_path: Path) -> None:
+    clock = Clock()
+    spool = DiskSpool(tmp_path / "s.sqlite", clock=clock)
+    spool.hold("sparkplug", "m1", "data", [sample(0)])
+    assert spool.spooled_rate("sparkplug") is None, "one row has no rate"
+    for i in range(1, 61):  # a 60 s outage of a machine ticking twice a second
+        clock.now += 0.5
+        spool.hold("sparkplug", f"m{i % 2}", "data", [sample(i)])
+    assert spool.spooled_rate("sparkplug") == 61 / 30
+    assert spool.spooled_rate("json") is None
+    spool.close()
+
+
 @pytest.mark.parametrize("content", [b"\x00garbage" * 4096, b"SQLite format 3\x00" + bytes(range(256)) * 20],
                          ids=["not-a-database", "malformed"])
 def test_a_corrupt_spool_file_is_moved_aside_and_a_new_spool_keeps_samples(

@@ -28,4 +28,4 @@ def test_a_json_only_gateway_has_no_sparkplug_lines() -> None:
     config = parse_config("mqtt: {host: b, formats: [json]}\n" + BASE, environ={})
     text = render_acl(config, "edge", "mes")
     assert "spBv1.0/" not in text.replace("spBv1.0/STATE/#", "")
-    assert "topic write focas/+/cmd" in text
+    assert f"topic write {config.mqtt.json_prefix}/+/cmd" in text  # focas/<host name>: no ids to name it

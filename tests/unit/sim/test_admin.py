@@ -29,3 +29,15 @@ def test_admin_routes_in_process() -> None:
     assert missing.value.status == 404
     with pytest.raises(ValueError):
         admin.handle("POST", "/machines/0/state", {"colour": "red"})
+
+
+def test_feed_hold_holds_the_status_word_until_released() -> None:
+    """`feed_hold` drives run HOLD (a test or the status page's scenario needs a machine in feed hold)."""
+    fleet = Fleet([MachineSpec(profile="30i")], base_port=0)
+    admin = AdminServer(fleet)
+    state = fleet[0].state
+    admin.handle("POST", "/machines/0/state", {"feed_hold": True})
+    held = state.status()
+    assert (held.run, held.motion) == (2, 0)
+    admin.handle("POST", "/machines/0/state", {"feed_hold": False})
+    assert state.status().run in (0, 3)  # back to the cycle: reset between parts, STaRT while cutting
