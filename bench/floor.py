@@ -2,8 +2,9 @@
 
 The fleet benchmark's simulators, period (100 ms) and poll grid (50 ms, shared TickGrid), polled by N
 FocasClients in this process, at two levels:
-- round trip: write the tick's prepared request PDU and await its answer frame (event loop, kernel,
-  frame decoding: nothing else);
+- round trip: write the tick's prepared request PDU (the daemon's own request for a 100 ms tick,
+  bench.workload.daemon_tick_items) and await its answer frame (event loop, kernel, frame decoding:
+  nothing else);
 - client batch: `FocasClient.batch` of the tick's items (adds the session lock, the request deadline,
   the answer split and the decode of what moved);
 - poller: the collector's MachinePollers with the daemon's config for the fleet, handing their changes to
@@ -27,7 +28,7 @@ from typing import Any
 
 from bench.fleet import start_fleet_sims
 from bench.report import Result
-from bench.workload import machines_section, tick_items
+from bench.workload import daemon_tick_items, machines_section
 from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
 from edge.config import parse_config
@@ -58,7 +59,7 @@ class DroppingSink:
 
 
 def _operation(level: str, cnc: FocasClient) -> Callable[[], Awaitable[Any]]:
-    items = tuple(tick_items())
+    items = daemon_tick_items(PERIOD_S)
     if level == "client batch":
         return lambda: cnc.batch(items)
     # The bench reaches into the client on purpose: the PDU it prepares for the tick, sent as it is.

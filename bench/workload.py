@@ -26,6 +26,21 @@ def tick_items() -> list[it.ReadItem]:
     return [*status, it.ReadMacros(MACRO_FIRST, MACRO_LAST), *pmc, it.ReadClock()]
 
 
+def daemon_tick_items(period_s: float = 0.1) -> tuple[it.ReadItem, ...]:
+    """The request the daemon sends on a tick of the status, macro and PMC groups for the config below: the
+    plan's reads of those groups (program name, main path and operator messages beside tick_items'), then
+    the clock. The floor measures this, so its round trip is the daemon's, however the plan grows."""
+    from edge.collect import plan as pl  # the bench's other users need only the items
+    from edge.config import parse_config
+    from edge.service.settings import machine_settings
+
+    config = parse_config("mqtt: {host: 127.0.0.1, sparkplug: {group_id: bench, edge_node_id: gw}}\n"
+                          f"machines:\n{machines_section([8193], period_s)}", "workload", {})
+    plan = pl.MachinePlan.build(machine_settings(config, config.machines[0]).poll)
+    reads = plan.reads_for({pl.Group.STATUS, pl.Group.MACROS, pl.Group.PMC})
+    return (*(read.item for read in reads), it.ReadClock())
+
+
 def machines_section(ports: list[int], period_s: float) -> str:
     """The `machines:` entries of a daemon config for simulated CNCs on these local ports, this plan each."""
     poll = poll_section(period_s)

@@ -429,6 +429,17 @@ def value_extractor(read: PlannedRead) -> ValueExtractor:
     return extract
 
 
+def elementwise(read: PlannedRead) -> bool:
+    """Whether metric i of this read is element i of its list result, coerced on its own (macros, PMC
+    ranges, positions, loads). Then an element equal to, and of the same type as, the element the read
+    gave last tick yields the value already offered for that metric last tick, so a tick may skip it
+    (edge.collect.poller). Mirrors value_extractor's `floats` and `ints` cases."""
+    if read.bits or _picker(read.item) is not _as_list:
+        return False
+    coercers = {_COERCERS.get(spec.type, _unchanged) for spec in read.metrics}
+    return coercers in ({_to_float}, {_to_int})
+
+
 def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:
     """How a result of this item becomes its metrics' raw values, in order."""
     match item:

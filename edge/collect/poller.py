@@ -184,6 +184,8 @@ class MachinePoller:
     async def report(self, samples: Sequence[Sample]) -> None:
         """Publish values learned outside a tick (a write's read-back) through change detection."""
         changed = self._changes.filter(samples)
+        # These metrics' reported values moved outside a tick: the next tick offers every value it reads again.
+        self._last_raw[:] = [_NOTHING] * len(self._last_raw)
         if changed and self.online:
             await self.sink.device_data(self.machine_id, changed)
 
@@ -422,7 +424,8 @@ class MachinePoller:
                 continue
             if failing and last_raw[position] is _NOTHING:  # the first answer since a failure (or ever)
                 self._answered(pl.drop_key(read.item))
-            if result == last_raw[position]:
+            previous = last_raw[position]
+            if result == previous:
                 last_raw[position] = result
                 continue  # an equal value decoded anew: nothing this read feeds has moved
             last_raw[position] = result
@@ -430,8 +433,18 @@ class MachinePoller:
                 alarm_status = int(result)
             elif kind is ReadKind.STATUS:
                 status = result
+            values = batch.extractors[index](result)
+            if batch.elementwise[index] and type(previous) is list and type(result) is list:
+                # A list that moved (macros, a PMC range, positions): offer only the elements that moved;
+                # an equal element was offered last tick and nothing has reported that metric since.
+                for spec, value, new, old in zip(read.metrics, values, result, previous, strict=False):
+                    if new != old or type(new) is not type(old):
+                        sample = report(spec.name, value, spec.type, timestamp)
+                        if sample is not None:
+                            samples.append(sample)
+                continue
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
-            for spec, value in zip(read.metrics, batch.extractors[index](result), strict=False):
+            for spec, value in zip(read.metrics, values, strict=False):
                 sample = report(spec.name, value, spec.type, timestamp)
                 if sample is not None:
                     samples.append(sample)

@@ -38,6 +38,7 @@ class TickBatch:
     kinds: tuple[ReadKind, ...]
     extractors: tuple[pl.ValueExtractor, ...]
     positions: tuple[int, ...]  # per read, its index in the plan's reads
+    elementwise: tuple[bool, ...]  # per read, plan.elementwise: unchanged elements of a moved list are skipped
     previous: Callable[[list[object]], tuple[object, ...]]  # the per-plan list -> this batch's entries
     indices: range  # 0..len(reads)-1
 
@@ -61,4 +62,5 @@ class TickBatch:
         else:
             previous = lambda last: ()  # noqa: E731
         return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
-                   tuple(extractor(r) for r in reads), where, previous, range(len(reads)))
+                   tuple(extractor(r) for r in reads), where, tuple(pl.elementwise(r) for r in reads), previous,
+                   range(len(reads)))

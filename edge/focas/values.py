@@ -63,7 +63,7 @@ def decode_scaled(data: bytes, offset: int = 0, *, strict: bool = True) -> Scale
 def decode_scaled_list(payload: bytes, *, strict: bool = True) -> list[ScaledValue]:
     if len(payload) % SCALED_SIZE:
         raise ProtocolError(f"expected a multiple of 8 bytes of scaled values, got {len(payload)}")
-    # The common shapes (no scaling; a positive power of ten) decoded inline, all at one unpack: a poll
+    # The common shapes (no scaling; a positive power of ten; vacant) decoded inline, all at one unpack: a poll
     # tick decodes every axis position this way. Anything else goes through decode_scaled and its checks.
     values: list[ScaledValue] = []
     append = values.append
@@ -72,6 +72,8 @@ def decode_scaled_list(payload: bytes, *, strict: bool = True) -> list[ScaledVal
             append(float(mantissa))
         elif base == 10 and 0 < exponent <= MAX_EXPONENT:
             append(mantissa / 10**exponent)
+        elif exponent == -1:  # the FF FF sentinel (a vacant macro): None, as decode_scaled says
+            append(None)
         else:
             append(decode_scaled(payload, index * SCALED_SIZE, strict=strict))
     return values

@@ -1,0 +1,228 @@
+"""A poll tick's Python cost without I/O: recorded CNC answers replayed to real pollers, DDATA encoded.
+
+    python -m bench.tickreplay record FILE [--period 0.1] [--seconds 60]
+    python -m bench.tickreplay replay FILE [--machines 100] [--rounds 1]
+
+`record` polls one simulated CNC (the fleet workload) for a while and keeps every request's answer frame
+and the poll times of every tick. `replay` gives each of N pollers its own client whose round trip hands
+back the recorded answer to the same request bytes (no socket, no waiting), runs the recorded ticks
+round-robin over the N machines and encodes each tick's changes as Sparkplug DATA, as the daemon does.
+CPU per tick is the collector's and encoder's Python work; N spreads it over N machines' objects, as a
+fleet does (cache misses included, loop and kernel excluded). For A/B of changes to the tick path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import collections
+import gc
+import pickle
+import tempfile
+import time
+import types
+from pathlib import Path
+from typing import Any
+
+from bench.floor import DroppingSink
+from bench.procs import SimProcess
+from bench.workload import CLOCK_MACRO, STAMP_MACRO, machines_section
+from edge.collect import plan as pl
+from edge.collect import poller as poller_module
+from edge.collect.changes import ChangeDetector
+from edge.collect.poller import MachinePoller
+from edge.collect.tickgrid import TickGrid
+from edge.config import parse_config
+from edge.focas.client import FocasClient
+from edge.focas.frame import Frame
+from edge.focas.functions import Context
+from edge.publish import mqtt_wire
+from edge.publish.aliases import AliasMap
+from edge.publish.forwarding import HeldBatch, Outbox
+from edge.publish.node import SparkplugNode
+from edge.service.gc_tuning import tune_collector
+from edge.service.settings import machine_settings
+
+
+def _config(period: float, ports: list[int]) -> Any:
+    return parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
+                        f"machines:\n{machines_section(ports, period)}", "replay", {})
+
+
+async def _record(period: float, seconds: float) -> dict[str, Any]:
+    sim = SimProcess(1, stamp_macro=STAMP_MACRO, clock_macro=CLOCK_MACRO)
+    frames: list[tuple[bytes, Frame]] = []
+    ticks: list[tuple[frozenset[pl.Group], list[float]]] = []
+    original_roundtrip = FocasClient._roundtrip
+    original_tick = MachinePoller._tick
+
+    async def roundtrip(self: FocasClient, data: bytes, expected: Any, what: str) -> Frame:
+        frame = await original_roundtrip(self, data, expected, what)
+        frames.append((data, frame))
+        return frame
+
+    async def tick(self: MachinePoller, plan: pl.MachinePlan, groups: Any) -> Any:
+        real = time.time
+        stamps: list[float] = []
+
+        def clock() -> float:
+            stamps.append(real())
+            return stamps[-1]
+
+        mono_real = time.monotonic
+
+        def mono() -> float:
+            stamps.append(mono_real())
+            return stamps[-1]
+
+        poller_module.time = types.SimpleNamespace(time=clock, monotonic=mono)  # type: ignore[assignment]
+        try:
+            return await original_tick(self, plan, groups)
+        finally:
+            poller_module.time = time  # type: ignore[assignment]
+            ticks.append((frozenset(groups), stamps))
+
+    FocasClient._roundtrip = roundtrip  # type: ignore[method-assign]
+    MachinePoller._tick = tick  # type: ignore[method-assign]
+    try:
+        config = _config(period, sim.ports)
+        with tempfile.TemporaryDirectory() as state:
+            poller = MachinePoller(machine_settings(config, config.machines[0]), DroppingSink(), Path(state),
+                                   jitter_s=0.0, grid=TickGrid(config.poll_grid_step_s))
+            task = asyncio.create_task(poller.run())
+            await asyncio.sleep(seconds)
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+            sysinfo = poller.session.sysinfo
+            await poller.close()
+    finally:
+        FocasClient._roundtrip = original_roundtrip  # type: ignore[method-assign]
+        MachinePoller._tick = original_tick  # type: ignore[method-assign]
+        sim.stop()
+    return {"period": period, "frames": frames, "ticks": ticks, "sysinfo": sysinfo}
+
+
+class _Replayed:
+    """The `time` module as _tick sees it: the recorded values of one tick, in call order."""
+
+    def __init__(self) -> None:
+        self.values: collections.deque[float] = collections.deque()
+        self.last = 0.0
+
+    def _next(self) -> float:
+        if self.values:
+            self.last = self.values.popleft()
+        return self.last
+
+    def time(self) -> float:
+        return self._next()
+
+    def monotonic(self) -> float:
+        return self._next()
+
+
+async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode: str) -> None:
+    answers: dict[bytes, list[Frame]] = collections.defaultdict(list)
+    for data, frame in recording["frames"]:
+        answers[data].append(frame)
+    config = _config(recording["period"], [8193] * machines)
+    node = SparkplugNode("bench", "gw", AliasMap())
+    node.session_started(0)
+    node.born = True
+    outbox = Outbox()
+    topics = mqtt_wire.TopicCache(v5=True)
+    sent: list[bytes] = []
+    clock = _Replayed()
+
+    with tempfile.TemporaryDirectory() as state:
+        pollers = []
+        for machine in config.machines:
+            poller = MachinePoller(machine_settings(config, machine), DroppingSink(), Path(state), jitter_s=0.0)
+            client = poller.session
+            assert isinstance(client, FocasClient)
+            positions: dict[bytes, int] = collections.defaultdict(int)
+
+            async def roundtrip(data: bytes, expected: Any, what: str,
+                                positions: dict[bytes, int] = positions) -> Frame:
+                recorded = answers[data]
+                frame = recorded[positions[data] % len(recorded)]
+                positions[data] += 1
+                return frame
+
+            client._roundtrip = roundtrip  # type: ignore[method-assign]
+            client.sysinfo = recording["sysinfo"]
+            client.context = Context.from_sysinfo(recording["sysinfo"])
+            client._connected = True
+            static = await poller._read_static()
+            plan = pl.MachinePlan.build(poller.machine.poll, static)
+            poller._full_plan = poller._plan = plan
+            poller._changes = ChangeDetector(plan.deadbands())
+            poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
+            poller._clock.new_session()
+            node.device_online(machine.id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS], [])
+            pollers.append((poller, plan))
+
+        def publish(device_id: str, samples: Any) -> None:
+            for message in node.device_data(device_id, samples):
+                prefix = topics.prefix(message.topic, message.retain)
+                assert prefix is not None
+                sent.append(mqtt_wire.publish_packet(prefix, message.payload))
+            outbox.record(HeldBatch(device_id, "data", samples))
+
+        ticks = recording["ticks"]
+        if gc_mode == "off":
+            gc.disable()
+        elif gc_mode in ("daemon", "refreeze"):
+            tune_collector()
+        elif gc_mode.startswith("young="):
+            tune_collector()
+            gc.set_threshold(int(gc_mode[6:]), *gc.get_threshold()[1:])
+        poller_module.time = clock  # type: ignore[assignment]
+        try:
+            for run in range(rounds + 1):  # round 0 warms up (first answers, births)
+                count = samples = 0
+                cpu = time.process_time()
+                for groups, stamps in ticks:
+                    for poller, plan in pollers:
+                        clock.values.extend(stamps)
+                        tick = await poller._tick(plan, groups)
+                        if tick.samples:
+                            publish(poller.machine_id, tick.samples)
+                            samples += len(tick.samples)
+                        count += 1
+                    if len(sent) >= 1000:  # a barrier a second, at 1,000 machine-cycles a second
+                        sent.clear()
+                        outbox.confirm(outbox.mark())
+                cpu = time.process_time() - cpu
+                if run == 0 and gc_mode == "refreeze":
+                    gc.collect()
+                    gc.freeze()
+                if run:
+                    print(f"round {run}: {machines} machines, {count} ticks, {samples / count:.2f} samples/tick, "
+                          f"{cpu / count * 1e6:.1f} us/tick")
+        finally:
+            poller_module.time = time  # type: ignore[assignment]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("mode", choices=("record", "replay"))
+    parser.add_argument("file", type=Path)
+    parser.add_argument("--period", type=float, default=0.1)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--machines", type=int, default=100)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--gc", default="daemon",
+                        help="collector settings: daemon (the daemon's), refreeze (and freeze after warming up), "
+                             "young=N, default (CPython's), off")
+    args = parser.parse_args()
+    if args.mode == "record":
+        recording = asyncio.run(_record(args.period, args.seconds))
+        args.file.write_bytes(pickle.dumps(recording))
+        print(f"recorded {len(recording['ticks'])} ticks, {len(recording['frames'])} frames")
+    else:
+        asyncio.run(_replay(pickle.loads(args.file.read_bytes()), args.machines, args.rounds, args.gc))
+
+
+if __name__ == "__main__":
+    main()
