@@ -49,7 +49,10 @@ def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: P
         assert poll.positions == ["absolute", "machine"] and poll.part_count
         assert [list(m.numbers) for m in poll.macros] == [[500, 501, 502, 503, 504, 505]]
         assert [p.range for p in poll.pmc] == ["F0-F3"]
-        assert poll.periods.status == 0.5 and poll.periods.params == 60.0  # measured; the rest from defaults
+        assert poll.periods.status <= 1.0 and poll.periods.params == 60.0  # measured; the rest from defaults
+    # Measured from one round trip per read: a collector pause in this process (the simulators run in it) can
+    # push one fast machine to the next period, never all three.
+    assert min(machine.poll.periods.status for machine in config.machines[:3]) == 0.5
     lathe = config.machines[3].poll
     assert lathe.macros == [] and lathe.pmc == [], "functions the control refused are left out"
     assert config.machines[4].poll.periods.status > 0.5, "a slow control is polled less often"

@@ -158,9 +158,13 @@ async def test_two_gateways_share_one_fleet_file_and_a_machine_moves_without_los
             daemons.extend(gateways.values())
             for daemon in gateways.values():
                 await daemon.start()
-            for hall, mids in HALLS.items():
-                for mid in mids:
-                    await wait_both(observers, f"{GROUP}/DBIRTH/{hall}/{mid}")
+            try:
+                for hall, mids in HALLS.items():
+                    for mid in mids:
+                        await wait_both(observers, f"{GROUP}/DBIRTH/{hall}/{mid}")
+            except AssertionError as exc:  # say what each gateway was doing
+                logs = "\n".join(f"--- {hall}:\n{daemon.output()[-3000:]}" for hall, daemon in gateways.items())
+                raise AssertionError(f"{exc}\n{logs}") from None
             await async_wait_for(lambda: all(len(clock_reads(o.snapshot(), "hall-a", MOVED)) >= 10
                                              for o in observers), 20, message="the moved machine's data")
 
