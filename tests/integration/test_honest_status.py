@@ -110,8 +110,9 @@ async def test_a_dropped_session_is_stale_in_status_json_and_to_a_late_json_subs
                              message="every state topic restated STALE")
         late = Observer(mosquitto, (f"{STATE}#",))
         try:
-            await async_wait_for(lambda: set(qualities(late.snapshot())) == topics, 10, message="retained state")
-            retained = [m for m in late.snapshot() if m.retain]
+            # At least m1's topics of this run (the suite's broker may hold retained ones of earlier tests too)
+            await async_wait_for(lambda: topics <= set(qualities(late.snapshot())), 10, message="retained state")
+            retained = [m for m in late.snapshot() if m.retain and m.topic in topics]
             assert retained and {json.loads(m.payload)["quality"] for m in retained} == {"STALE"}
             assert all("stale_since" in json.loads(m.payload) for m in retained)
         finally:
@@ -135,8 +136,8 @@ async def test_after_a_clean_stop_a_late_json_subscriber_reads_stale(mosquitto: 
     topics = set(qualities(observer.snapshot()))
     late = Observer(mosquitto, (f"{STATE}#",))
     try:
-        await async_wait_for(lambda: set(qualities(late.snapshot())) == topics, 10, message="retained state")
-        assert set(qualities(late.snapshot()).values()) == {"STALE"}
+        await async_wait_for(lambda: topics <= set(qualities(late.snapshot())), 10, message="retained state")
+        assert {quality for topic, quality in qualities(late.snapshot()).items() if topic in topics} == {"STALE"}
     finally:
         late.close()
 
