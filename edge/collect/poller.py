@@ -9,6 +9,11 @@ at every reconnect, since one transient answer must not end a data stream. A bro
 device_offline, backoff, and a fresh birth with the full state on recovery.
 
 What a tick sends, prepared once per plan, is edge.collect.tick_batch; the counters are edge.collect.stats.
+
+Over 600 lines on purpose: the loop's states (connect, static reads, ticks, clock probes, dropped-function
+retries, offline) share one session and one set of counters, and the hot tick path reads them as local
+attributes; what could leave without crossing that state already has (tick_batch, stats, clock_feed,
+plant_state, execution, utilisation).
 """
 
 from __future__ import annotations
