@@ -31,9 +31,14 @@ LOST = "connection lost"
 CLOSED = "closed before CONNACK"
 
 
+def is_tls_failure(error: BaseException | str) -> bool:
+    """A TLS handshake or certificate verification error (not a refused or unreachable TCP connect)."""
+    return isinstance(error, ssl.SSLError | ssl.CertificateError)
+
+
 def classify(error: BaseException | str) -> str:
     """The reason in one word a person acts on: refused, unresolvable, not authorised, TLS, ..."""
-    if isinstance(error, ssl.SSLError | ssl.CertificateError):
+    if is_tls_failure(error):
         return TLS
     if isinstance(error, socket.gaierror):
         return UNRESOLVABLE

@@ -1,4 +1,7 @@
-"""Why an MQTT connect attempt failed, said in the config's terms (for one WARNING line per attempt).
+"""What to change when an MQTT connect fails, said in the config's terms (the hint on the outage's WARNING).
+
+The reason itself (refused, TLS, not authorised, ...) is edge.publish.broker_trouble.classify, the one
+classifier of broker connect errors; this module only turns a cause into the setting to look at.
 
 A broker that requires a client certificate lets a TLS 1.3 client finish its handshake and then closes
 the session when it reads CONNECT: paho reports only "connection lost" and logs the TLS alert on its own
@@ -7,14 +10,7 @@ the session when it reads CONNECT: paho reports only "connection lost" and logs 
 
 from __future__ import annotations
 
-import ssl
-
 from edge.publish.settings import PublishSettings
-
-
-def is_tls_failure(error: BaseException) -> bool:
-    """A TLS handshake or certificate verification error (not a refused or unreachable TCP connect)."""
-    return isinstance(error, ssl.SSLError | ssl.CertificateError)
 
 
 def hint(cause: str, settings: PublishSettings) -> str:

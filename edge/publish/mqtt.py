@@ -42,7 +42,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
-from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble
+from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble, is_tls_failure
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -232,7 +232,7 @@ class MqttConnection:
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            tls = connect_failure.is_tls_failure(exc)
+            tls = is_tls_failure(exc)
             self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
         finally:
