@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.collect import poller as poller_module
+from edge.collect.tickgrid import TickGrid
 from edge.samples import Sample
 from edge.service.daemon import Daemon, run_daemon
 
@@ -49,6 +50,7 @@ class Window:
 
     def reset(self) -> None:
         self.started = time.monotonic()
+        self.schedstat = _schedstat()
         self.lag: list[float] = []
         self.gc: dict[int, list[float]] = {0: [], 1: [], 2: []}
         self.gc_collected = 0
@@ -59,8 +61,11 @@ class Window:
 
     def report(self) -> dict[str, Any]:
         gc_all = [d for durations in self.gc.values() for d in durations]
+        ran, waited = (after - before for after, before in zip(_schedstat(), self.schedstat, strict=True))
         return {
             "window_s": time.monotonic() - self.started,
+            "loop_thread_ran_s": ran,  # on a CPU
+            "loop_thread_waited_s": waited,  # runnable, but the host ran something else (a loaded host)
             "loop_lag": _quantiles(self.lag),
             "gc": {f"gen{g}": _quantiles(d) for g, d in self.gc.items()} | {"all": _quantiles(gc_all)},
             "gc_collected": self.gc_collected,
@@ -74,6 +79,15 @@ class Window:
         }
 
 
+def _schedstat() -> tuple[float, float]:
+    """(seconds on a CPU, seconds runnable but waiting for one) of this process's main thread (Linux)."""
+    try:
+        ran, waited, _ = Path("/proc/self/schedstat").read_text().split()
+    except (OSError, ValueError):
+        return 0.0, 0.0
+    return int(ran) / 1e9, int(waited) / 1e9
+
+
 def _spread(sizes: Counter[int]) -> dict[str, float]:
     slots = sum(sizes.values())
     if not slots:
@@ -83,8 +97,8 @@ def _spread(sizes: Counter[int]) -> dict[str, float]:
             "mean": sum(ordered) / slots}
 
 
-def install(window: Window, daemon: Daemon) -> None:
-    """The probes: gc callbacks, the tick grid's timers, the tick, the outputs, a loop-lag timer."""
+def watch_collector(window: Window) -> None:
+    """Every collection's pause (by generation) into the window, from gc.callbacks."""
     gc_started = [0.0]
 
     def on_gc(phase: str, info: dict[str, int]) -> None:
@@ -95,7 +109,10 @@ def install(window: Window, daemon: Daemon) -> None:
             window.gc_collected += info["collected"]
 
     gc.callbacks.append(on_gc)
-    grid = daemon.tick_grid
+
+
+def watch_grid(window: Window, grid: TickGrid) -> None:
+    """How late each grid slot's timer fires, and how many machines it wakes."""
     fire = grid._fire
 
     def timed_fire(slot: tuple[float, int]) -> None:
@@ -105,6 +122,12 @@ def install(window: Window, daemon: Daemon) -> None:
         fire(slot)
 
     grid._fire = timed_fire  # type: ignore[method-assign]
+
+
+def install(window: Window, daemon: Daemon) -> None:
+    """The probes: gc callbacks, the tick grid's timers, the tick, the outputs, a loop-lag timer."""
+    watch_collector(window)
+    watch_grid(window, daemon.tick_grid)
     outputs_data = daemon.outputs.device_data
 
     async def timed_data(device_id: str, samples: Sequence[Sample]) -> None:
@@ -122,10 +145,11 @@ def install(window: Window, daemon: Daemon) -> None:
         return result
 
     poller_module.MachinePoller._tick = timed_tick  # type: ignore[method-assign]
-    asyncio.get_running_loop().create_task(_lag_probe(window), name="latency-lag-probe")
+    asyncio.get_running_loop().create_task(lag_probe(window), name="latency-lag-probe")
 
 
-async def _lag_probe(window: Window) -> None:
+async def lag_probe(window: Window) -> None:
+    """How late a 10 ms timer runs, over and over: the loop's lag as any callback due then sees it."""
     loop = asyncio.get_running_loop()
     while True:
         due = loop.time() + LAG_PROBE_S
