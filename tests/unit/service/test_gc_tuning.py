@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import weakref
 
-from edge.service.gc_tuning import YOUNG_THRESHOLD, CollectorKeeper, settle, tune_collector
+from edge.service.gc_tuning import MIDDLE_EVERY, YOUNG_THRESHOLD, CollectorKeeper, settle, tune_collector
 
 
 def test_tuning_freezes_start_up_and_raises_only_the_young_threshold() -> None:
@@ -95,4 +96,29 @@ def test_keeper_recycles_so_frozen_cycles_are_freed() -> None:
         assert keeper.step()  # the hourly recycle unfreezes and collects everything
         assert alive() is None
     finally:
+        gc.unfreeze()
+
+
+async def test_keeper_runs_young_and_middle_collections_by_the_clock() -> None:
+    """The allocation count can hover near zero in a steady fleet (each tick frees what it makes) while the
+    young generation grows: the keeper collects it by time instead."""
+    generations: list[int] = []
+    two_middle = asyncio.Event()
+
+    def seen(phase: str, info: dict[str, int]) -> None:
+        if phase == "stop":
+            generations.append(info["generation"])
+            if generations.count(1) >= 2:
+                two_middle.set()
+
+    keeper = CollectorKeeper(lambda: True, pace_s=0.001)
+    gc.callbacks.append(seen)
+    task = asyncio.create_task(keeper.run())
+    try:
+        async with asyncio.timeout(10):
+            await two_middle.wait()
+        assert generations.count(0) >= 2 * (MIDDLE_EVERY - 1)
+    finally:
+        task.cancel()
+        gc.callbacks.remove(seen)
         gc.unfreeze()
