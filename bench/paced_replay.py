@@ -1,6 +1,7 @@
 """The fleet's ticks at their real pace without sockets: where a sample's time in the gateway goes.
 
     python -m bench.paced_replay FILE [--machines 1000] [--seconds 30] [--rtt 0.002] [--gc keeper]
+                                      [--period P] [--grid STEP]
 
 FILE is a `python -m bench.tickreplay record` recording. N pollers wake on the daemon's TickGrid at the
 recorded period, their start phases spread as the daemon spreads them; each round trip hands back the
@@ -37,13 +38,14 @@ from typing import Any
 
 from bench.floor import DroppingSink
 from bench.latency_daemon import Window, lag_probe, watch_collector, watch_grid
-from bench.tickreplay import _config
+from bench.workload import machines_section
 from edge.collect import plan as pl
 from edge.collect import poller as poller_module
 from edge.collect.changes import ChangeDetector
 from edge.collect.plant_state import SPECS as PLANT_STATE_SPECS
 from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
+from edge.config import parse_config
 from edge.focas.client import FocasClient
 from edge.focas.frame import Frame
 from edge.focas.functions import Context
@@ -88,13 +90,17 @@ class PacedMachine:
 
 
 async def _paced(recording: dict[str, Any], machines: int, seconds: float, rtt: float, gc_mode: str,
-                 warmup: float) -> dict[str, Any]:
+                 warmup: float, grid_s: float | None = None, period_s: float | None = None) -> dict[str, Any]:
     answers: dict[bytes, list[Frame]] = collections.defaultdict(list)
     for data, frame in recording["frames"]:
         answers[data].append(frame)
-    period = recording["period"]
-    config = _config(period, [8193] * machines)
-    grid = TickGrid(config.poll_grid_step_s)
+    period = period_s or recording["period"]
+    # Another period than the recording's: loads and counters every 10th and 100th tick as at 10 Hz
+    # (bench.workload's same plan), so a 10 Hz recording's request shapes are the ones asked at any pace.
+    config = parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
+                          f"machines:\n{machines_section([8193] * machines, period, period != recording['period'])}",
+                          "replay", {})
+    grid = TickGrid(grid_s or config.poll_grid_step_s)
     node = SparkplugNode("bench", "gw", AliasMap())
     node.session_started(0)
     node.born = True
@@ -186,11 +192,15 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=10.0)
     parser.add_argument("--rtt", type=float, default=0.002)
     parser.add_argument("--gc", default="keeper", choices=("daemon", "settle", "keeper"))
+    parser.add_argument("--grid", type=float, default=None, help="poll grid step, seconds (default: the config's auto)")
+    parser.add_argument("--period", type=float, default=None,
+                        help="poll period, seconds (default the recording's; another one polls the same plan per "
+                             "tick: a 10 Hz recording at 1 s is 100 x 10 Hz's work per tick at 1,000 x 1 Hz's pace)")
     parser.add_argument("--out", type=Path, default=None, help="write the figures as JSON here")
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)
     report = asyncio.run(_paced(pickle.loads(args.file.read_bytes()), args.machines, args.seconds, args.rtt,
-                                args.gc, args.warmup))
+                                args.gc, args.warmup, args.grid, args.period))
     text = json.dumps(report, indent=1)
     if args.out is not None:
         args.out.write_text(text)
