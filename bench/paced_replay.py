@@ -58,11 +58,24 @@ from edge.service.settings import machine_settings
 STARTS_PER_S = 200.0  # as the daemon spreads a fleet's first connects (edge.service.daemon)
 
 
+class _Middle:
+    """The stamp moment before edge.collect.answer_time: half of the whole span after the send."""
+
+    def half_rtt(self, rtt_s: float) -> float:
+        return rtt_s / 2
+
+    def reset(self) -> None:
+        pass
+
+
 class PacedMachine:
     """One poller whose client answers from the recording after `rtt` seconds, with the times it saw."""
 
-    def __init__(self, poller: MachinePoller, answers: dict[bytes, list[Frame]], rtt: float) -> None:
+    def __init__(self, poller: MachinePoller, answers: dict[bytes, list[Frame]], rtt: float,
+                 middle: bool = False) -> None:
         self.poller = poller
+        if middle:  # stamp the middle of send-to-handled, as the poller did before edge.collect.answer_time
+            poller._answer_time = _Middle()  # type: ignore[assignment]
         self.answered = 0.0  # when the CNC answered the latest request (half the round trip after the send)
         self.arrived = 0.0  # when its answer arrived
         self.stamped_at = 0.0  # the gateway moment the latest tick was stamped for
@@ -90,7 +103,8 @@ class PacedMachine:
 
 
 async def _paced(recording: dict[str, Any], machines: int, seconds: float, rtt: float, gc_mode: str,
-                 warmup: float, grid_s: float | None = None, period_s: float | None = None) -> dict[str, Any]:
+                 warmup: float, grid_s: float | None = None, period_s: float | None = None,
+                 middle: bool = False) -> dict[str, Any]:
     answers: dict[bytes, list[Frame]] = collections.defaultdict(list)
     for data, frame in recording["frames"]:
         answers[data].append(frame)
@@ -118,7 +132,7 @@ async def _paced(recording: dict[str, Any], machines: int, seconds: float, rtt: 
             client.sysinfo = recording["sysinfo"]
             client.context = Context.from_sysinfo(recording["sysinfo"])
             client._connected = True
-            fleet.append(PacedMachine(poller, answers, rtt))
+            fleet.append(PacedMachine(poller, answers, rtt, middle))
 
         async def run(machine: PacedMachine) -> None:
             await asyncio.sleep(random.uniform(0, max(1.0, machines / STARTS_PER_S)))
@@ -196,11 +210,13 @@ def main() -> None:
     parser.add_argument("--period", type=float, default=None,
                         help="poll period, seconds (default the recording's; another one polls the same plan per "
                              "tick: a 10 Hz recording at 1 s is 100 x 10 Hz's work per tick at 1,000 x 1 Hz's pace)")
+    parser.add_argument("--stamp-middle", action="store_true",
+                        help="stamp ticks at the middle of send-to-handled (the poller before answer_time)")
     parser.add_argument("--out", type=Path, default=None, help="write the figures as JSON here")
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)
     report = asyncio.run(_paced(pickle.loads(args.file.read_bytes()), args.machines, args.seconds, args.rtt,
-                                args.gc, args.warmup, args.grid, args.period))
+                                args.gc, args.warmup, args.grid, args.period, args.stamp_middle))
     text = json.dumps(report, indent=1)
     if args.out is not None:
         args.out.write_text(text)
