@@ -238,7 +238,9 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
 def diagnosis_line(d: dict[str, Any]) -> str:
     """One line of bench.latency_daemon's figures: what held the loop, and for how long."""
     gc_all, lag, slots = d["gc"]["all"], d["loop_lag"], d["machines_per_slot"]
-    return (f"loop lag p50/p99/max {lag.get('p50_ms', 0):.1f}/{lag.get('p99_ms', 0):.1f}/"
+    return (f"loop thread ran {d.get('loop_thread_ran_s', 0):.1f} s, waited for a CPU "
+            f"{d.get('loop_thread_waited_s', 0):.1f} s of {d['window_s']:.0f} s; "
+            f"loop lag p50/p99/max {lag.get('p50_ms', 0):.1f}/{lag.get('p99_ms', 0):.1f}/"
             f"{lag.get('max_ms', 0):.0f} ms; "
             f"gc {gc_all['n']} collections, {gc_all.get('sum_ms', 0):.0f} ms, max {gc_all.get('max_ms', 0):.0f} ms "
             f"(gen2 {d['gc']['gen2']['n']}), {d['gc_tracked_objects']} tracked, {d['gc_frozen_objects']} frozen; "
