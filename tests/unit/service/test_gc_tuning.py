@@ -6,7 +6,7 @@ import asyncio
 import gc
 import weakref
 
-from edge.service.gc_tuning import MIDDLE_EVERY, YOUNG_THRESHOLD, CollectorKeeper, settle, tune_collector
+from edge.service.gc_tuning import FREEZE_EVERY, YOUNG_THRESHOLD, CollectorKeeper, settle, tune_collector
 
 
 def test_tuning_freezes_start_up_and_raises_only_the_young_threshold() -> None:
@@ -99,25 +99,29 @@ def test_keeper_recycles_so_frozen_cycles_are_freed() -> None:
         gc.unfreeze()
 
 
-async def test_keeper_runs_young_and_middle_collections_by_the_clock() -> None:
+async def test_keeper_runs_young_collections_by_the_clock_and_freezes_their_survivors() -> None:
     """The allocation count can hover near zero in a steady fleet (each tick frees what it makes) while the
-    young generation grows: the keeper collects it by time instead."""
-    generations: list[int] = []
-    two_middle = asyncio.Event()
+    young generation grows: the keeper collects it by time, and freezes what survives instead of walking it
+    again in middle and full collections."""
+    generations: list[int] = []  # young collections seen
+    enough = asyncio.Event()
 
     def seen(phase: str, info: dict[str, int]) -> None:
-        if phase == "stop":
-            generations.append(info["generation"])
-            if generations.count(1) >= 2:
-                two_middle.set()
+        if phase == "stop" and info["generation"] == 0:
+            generations.append(0)
+            if len(generations) >= 3 * FREEZE_EVERY:
+                enough.set()
 
     keeper = CollectorKeeper(lambda: True, pace_s=0.001)
     gc.callbacks.append(seen)
+    gc.freeze()
     task = asyncio.create_task(keeper.run())
     try:
+        kept = [[i] for i in range(1000)]  # lists (always tracked): the ticks' survivors
+        frozen_before = gc.get_freeze_count()
         async with asyncio.timeout(10):
-            await two_middle.wait()
-        assert generations.count(0) >= 2 * (MIDDLE_EVERY - 1)
+            await enough.wait()
+        assert gc.get_freeze_count() >= frozen_before + len(kept)
     finally:
         task.cancel()
         gc.callbacks.remove(seen)
