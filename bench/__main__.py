@@ -32,7 +32,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         periods = [float(p) for p in args.period.split(",")] if args.period else None
         result = fleet.run(quick=args.quick, sizes=sizes, repeats=args.repeat, duration_s=args.duration,
                            spy_to=spy, py_spy=args.py_spy, periods=periods, warmup_s=args.warmup,
-                           tracemalloc_to=Path(args.tracemalloc) if args.tracemalloc else None)
+                           tracemalloc_to=Path(args.tracemalloc) if args.tracemalloc else None,
+                           diagnose=args.diagnose, same_plan=args.same_plan)
         return result
 
     return {
@@ -74,6 +75,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="fleet: run the daemon under tracemalloc and write its live allocations by module "
                              "at the end of the window into FILE (the largest size's first run; CPU figures "
                              "of that run include tracemalloc's cost); summarise with python -m bench.memory_summary")
+    parser.add_argument("--diagnose", action="store_true",
+                        help="fleet: run the daemon with bench.latency_daemon's probes (loop lag, GC pauses, grid "
+                             "slots, stamp to outputs) and add their figures to each row")
+    parser.add_argument("--same-plan", action="store_true",
+                        help="fleet: servo loads every 10th and counters every 100th tick at any period (as at 10 Hz), "
+                             "so CPU per cycle compares the same reads across periods")
     parser.add_argument("--py-spy", default="py-spy", help="the py-spy executable")
     parser.add_argument("--results", type=Path, default=None, help="directory for JSON results")
     args = parser.parse_args(argv)

@@ -9,6 +9,7 @@ one per tick); the clock-only reads between ticks are counted apart (per machine
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 import signal
@@ -50,12 +51,14 @@ class FleetOptions:
     spy_to: Path | None = None  # py-spy collapsed stacks of the measuring window (all threads)
     py_spy: str = "py-spy"
     tracemalloc_to: Path | None = None  # live Python allocations by module at the window's end (JSON)
+    diagnose: bool = False  # the daemon under bench.latency_daemon: loop lag, GC pauses, grid slots in the row
+    same_plan: bool = False  # loads and counters every 10th and 100th tick at any period (as at 10 Hz)
 
 
-def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float) -> str:
+def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float, same_plan: bool = False) -> str:
     return (f"mqtt:\n  host: {broker.host}\n  port: {broker.port}\n  formats: [sparkplug]\n"
             f"  sparkplug: {{group_id: {GROUP}, edge_node_id: gw}}\n"
-            f"state_dir: {state_dir}\nmachines:\n{machines_section(ports, period_s)}")
+            f"state_dir: {state_dir}\nmachines:\n{machines_section(ports, period_s, same_plan)}")
 
 
 def wait_until(condition: Any, timeout: float, what: str) -> None:
@@ -85,12 +88,14 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         sims = start_fleet_sims(n)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"
-        config.write_text(config_text(broker, workdir / "state", ports, options.period_s))
+        config.write_text(config_text(broker, workdir / "state", ports, options.period_s, options.same_plan))
         started = time.time()
-        daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to, options.tracemalloc_to)
+        diagnosis = workdir / "diagnosis.json" if options.diagnose else None
+        daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to, options.tracemalloc_to,
+                               diagnosis)
         born_s = wait_for_births(subscriber, daemon, n, started, workdir)
         time.sleep(options.warmup_s)
-        measured = _window(options, daemon, sims, subscriber, broker_process)
+        measured = _window(options, daemon, sims, subscriber, broker_process, diagnosis)
         measured["deaths"] = subscriber.deaths
         measured["all_born_s"] = born_s
         if options.tracemalloc_to is not None:
@@ -147,7 +152,10 @@ def start_fleet_sims(machines: int) -> list[SimProcess]:
 
 
 def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess],
-            subscriber: LatencySubscriber, broker: psutil.Process | None) -> dict[str, Any]:
+            subscriber: LatencySubscriber, broker: psutil.Process | None,
+            diagnosis: Path | None = None) -> dict[str, Any]:
+    if diagnosis is not None:
+        daemon.proc.send_signal(signal.SIGUSR1)  # bench.latency_daemon: a fresh window
     psutil.cpu_percent(None)
     host_before = psutil.cpu_times()
     subscriber.take()
@@ -175,6 +183,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     switches = daemon.context_switches() - switches_before
     sims_after = [sim.stats() for sim in sims]
     subscriber.recording = False
+    diagnosed = read_diagnosis(daemon, diagnosis) if diagnosis is not None else None
     rss.append(daemon.rss_bytes())
     system_cpu = psutil.cpu_percent(None)
     host_after = psutil.cpu_times()
@@ -182,6 +191,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         spy.wait(30)
     errors = subscriber.take_stamp_errors()
     in_gateway, to_subscriber = subscriber.take_sample_split()
+    values, messages = subscriber.take_value_counts()
     change, sample = subscriber.take()
     clock_reads = sum(a.get("clock_pdus", 0) - b.get("clock_pdus", 0)
                       for a, b in zip(sims_after, sims_before, strict=True))
@@ -219,7 +229,33 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         "steal_pct": _steal_pct(host_before, host_after),
         "window_s": elapsed,
         "fds": daemon.open_fds(),
+        "values_per_cycle": values / cycles if cycles else float("nan"),
+        "values_per_message": values / messages if messages else float("nan"),
+        **({"diagnosis": diagnosed} if diagnosed is not None else {}),
     }
+
+
+def diagnosis_line(d: dict[str, Any]) -> str:
+    """One line of bench.latency_daemon's figures: what held the loop, and for how long."""
+    gc_all, lag, slots = d["gc"]["all"], d["loop_lag"], d["machines_per_slot"]
+    return (f"loop thread ran {d.get('loop_thread_ran_s', 0):.1f} s, waited for a CPU "
+            f"{d.get('loop_thread_waited_s', 0):.1f} s of {d['window_s']:.0f} s; "
+            f"loop lag p50/p99/max {lag.get('p50_ms', 0):.1f}/{lag.get('p99_ms', 0):.1f}/"
+            f"{lag.get('max_ms', 0):.0f} ms; "
+            f"gc {gc_all['n']} collections, {gc_all.get('sum_ms', 0):.0f} ms, max {gc_all.get('max_ms', 0):.0f} ms "
+            f"(gen2 {d['gc']['gen2']['n']}), {d['gc_tracked_objects']} tracked, {d['gc_frozen_objects']} frozen; "
+            f"machines per slot {slots.get('min')}..{slots.get('max')} (mean {slots.get('mean', 0):.1f}); "
+            f"stamp->outputs p50/p99 {d['stamp_to_outputs'].get('p50_ms', 0):.0f}/"
+            f"{d['stamp_to_outputs'].get('p99_ms', 0):.0f} ms; tick p99 {d['tick'].get('p99_ms', 0):.0f} ms")
+
+
+def read_diagnosis(daemon: DaemonProcess, out: Path) -> dict[str, Any]:
+    """The window's loop lag, GC pauses and grid slots from bench.latency_daemon (SIGUSR2 writes them)."""
+    out.unlink(missing_ok=True)
+    daemon.proc.send_signal(signal.SIGUSR2)
+    wait_until(lambda: out.exists() and out.stat().st_size > 0, 30, f"the latency diagnosis in {out}")
+    time.sleep(0.2)  # the writer's last bytes
+    return dict(json.loads(out.read_text()))
 
 
 def _steal_pct(before: Any, after: Any) -> float:
@@ -239,7 +275,8 @@ SUMMARY_KEYS = ("all_born_s", "cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_p
                 "cycles_per_s", "achieved_pct", "overruns", "change_p50_ms", "change_p99_ms", "sample_p50_ms",
                 "sample_p99_ms", "in_gateway_p99_ms", "to_subscriber_p99_ms", "stamp_err_p50_ms",
                 "stamp_abs_p99_ms", "stamp_abs_max_ms", "stamps_seen",
-                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "host_cpu_pct", "steal_pct", "fds")
+                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "host_cpu_pct", "steal_pct", "fds",
+                "values_per_cycle", "values_per_message")
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -251,12 +288,15 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     cpu = [r["cpu_us_per_cycle"] for r in runs]
     row["cpu_us_range"] = f"{min(cpu):.0f}..{max(cpu):.0f}"
     row["planned_per_s"] = runs[0]["planned_per_s"]
+    if "diagnosis" in runs[0]:
+        row["diagnosis"] = runs[0]["diagnosis"]
     return row
 
 
 def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, duration_s: float | None = None,
         spy_to: Path | None = None, py_spy: str = "py-spy", periods: list[float] | None = None,
-        warmup_s: float | None = None, tracemalloc_to: Path | None = None) -> Result:
+        warmup_s: float | None = None, tracemalloc_to: Path | None = None, diagnose: bool = False,
+        same_plan: bool = False) -> Result:
     sizes = sizes or ([5, 20] if quick else [10, 50, 100, 200])
     periods = periods or [0.1]
     duration = duration_s or (5.0 if quick else 20.0)
@@ -264,28 +304,35 @@ def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, d
     repeats = 1 if quick else repeats
     command = (f"python -m bench fleet{' --quick' if quick else ''} --sizes {','.join(map(str, sizes))} "
                f"--period {','.join(f'{p:g}' for p in periods)} --repeat {repeats} --duration {duration:g}"
-               f"{f' --warmup {warmup:g}' if warmup_s is not None else ''}")
+               f"{f' --warmup {warmup:g}' if warmup_s is not None else ''}{' --diagnose' if diagnose else ''}"
+               f"{' --same-plan' if same_plan else ''}")
     result = Result("fleet", command)
+    extra = {"diagnose": diagnose, "same_plan": same_plan}
     for period in periods:
-        _run_period(result, period, sizes, repeats, duration, warmup, spy_to, py_spy, tracemalloc_to)
+        _run_period(result, period, sizes, repeats, duration, warmup, spy_to, py_spy, tracemalloc_to, extra)
     return result
 
 
 def _run_period(result: Result, period: float, sizes: list[int], repeats: int, duration: float, warmup: float,
-                spy_to: Path | None, py_spy: str, tracemalloc_to: Path | None = None) -> None:
+                spy_to: Path | None, py_spy: str, tracemalloc_to: Path | None = None,
+                extra: dict[str, bool] | None = None) -> None:
     """Every fleet size at one poll period: rows and target checks into `result`."""
     by_size: dict[int, dict[str, Any]] = {}
     for n in sizes:
         first_of_biggest = [n == max(sizes) and i == 0 for i in range(repeats)]
         runs = [run_fleet(FleetOptions(n, period_s=period, duration_s=duration, warmup_s=warmup,
                                        spy_to=spy_to if first else None, py_spy=py_spy,
-                                       tracemalloc_to=tracemalloc_to if first else None))
+                                       tracemalloc_to=tracemalloc_to if first else None,
+                                       diagnose=bool(extra and extra["diagnose"]),
+                                       same_plan=bool(extra and extra["same_plan"])))
                 for first in first_of_biggest]
         by_size[n] = summarise(runs)
         result.rows.append(by_size[n])
         print(f"  fleet N={n} period {period:g}s: {by_size[n]['cpu_us_per_cycle']:.0f} us/cycle, "
               f"{by_size[n]['achieved_pct']:.0f}% of plan, change p99 {by_size[n]['change_p99_ms']:.0f} ms, "
               f"stamp error p99 {by_size[n]['stamp_abs_p99_ms']:.1f} ms", flush=True)
+        if "diagnosis" in by_size[n]:
+            print(f"  diagnosis N={n}: {diagnosis_line(by_size[n]['diagnosis'])}", flush=True)
     biggest = max(by_size)
     at = 100 if 100 in by_size else biggest
     where = f"{at} machines x {period:g} s"

@@ -87,12 +87,12 @@ def fmt(value: object) -> str:
 
 
 def table(rows: Sequence[dict[str, Any]]) -> str:
-    """Rows as an aligned text table (columns in first-seen key order)."""
+    """Rows as an aligned text table (columns in first-seen key order; nested figures stay in the JSON only)."""
     if not rows:
         return "(no rows)"
     columns: list[str] = []
     for row in rows:
-        columns.extend(k for k in row if k not in columns)
+        columns.extend(k for k, v in row.items() if k not in columns and not isinstance(v, dict))
     cells = [[fmt(row.get(c)) for c in columns] for row in rows]
     widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(columns)]
     lines = ["  ".join(c.ljust(w) for c, w in zip(columns, widths, strict=True))]

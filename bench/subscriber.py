@@ -49,6 +49,8 @@ class LatencySubscriber:
         self.dbirths = Counter[str]()  # every DBIRTH per device: a second one is a rebirth
         self.deaths = 0
         self.ddata = Counter[str]()
+        self.values = 0  # metrics in the DDATA recorded (values published)
+        self.messages = 0
         self.overruns: int | None = None
         self._stamp_alias: dict[str, int] = {}
         self._clock_alias: dict[str, int] = {}
@@ -113,6 +115,8 @@ class LatencySubscriber:
             elif metric.alias == clock_alias and not metric.is_null:
                 error = clock_macro_error(metric.timestamp / 1000, metric.double_value)
         with self._lock:
+            self.values += len(metrics)
+            self.messages += 1
             self.sample_latency_s.append(sample)
             self.in_gateway_s.append(published - metrics[0].timestamp / 1000)
             self.to_subscriber_s.append(received - published)
@@ -149,6 +153,13 @@ class LatencySubscriber:
             self.change_latency_s, self.sample_latency_s, self.stamp_error_s = [], [], []
             self.in_gateway_s, self.to_subscriber_s = [], []
         return change, sample
+
+    def take_value_counts(self) -> tuple[int, int]:
+        """(values, DDATA messages) recorded so far; forgotten after."""
+        with self._lock:
+            counts = self.values, self.messages
+            self.values = self.messages = 0
+        return counts
 
     def take_sample_split(self) -> tuple[list[float], list[float]]:
         """The two parts of `sample` recorded so far: (in the gateway, to the subscriber); forgotten after."""

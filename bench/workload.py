@@ -41,17 +41,21 @@ def daemon_tick_items(period_s: float = 0.1) -> tuple[it.ReadItem, ...]:
     return (*(read.item for read in reads), it.ReadClock())
 
 
-def machines_section(ports: list[int], period_s: float) -> str:
+def machines_section(ports: list[int], period_s: float, same_plan: bool = False) -> str:
     """The `machines:` entries of a daemon config for simulated CNCs on these local ports, this plan each."""
-    poll = poll_section(period_s)
+    poll = poll_section(period_s, same_plan)
     return "".join(f"  - {{id: m{i + 1:03d}, host: 127.0.0.1, port: {port}, poll: {poll}}}\n"
                    for i, port in enumerate(ports))
 
 
-def poll_section(period_s: float) -> str:
+def poll_section(period_s: float, same_plan: bool = False) -> str:
     """The `poll:` YAML of one machine for the same plan: status, macros and PMC every `period_s`; servo loads
     (1 s) and counters (10 s) at their defaults, or every `period_s` when it is slower (a machine polled every
-    3 s must not tick every second for its loads)."""
+    3 s must not tick every second for its loads).
+
+    `same_plan`: loads every 10th and counters every 100th tick at any period, as the defaults are at 10 Hz,
+    so two fleets at different periods do the same reads per cycle (issue 25 compares their CPU per cycle)."""
+    loads, counters = (10 * period_s, 100 * period_s) if same_plan else (max(period_s, 1.0), max(period_s, 10.0))
     pmc = ", ".join(f"{{range: {a}{s}-{a}{e}, data_type: {t.name.lower()}}}" for a, s, e, t in PMC_RANGES)
-    return (f"{{periods: {{status: {period_s}, macros: {period_s}, pmc: {period_s}, loads: {max(period_s, 1.0)}, "
-            f"counters: {max(period_s, 10.0)}}}, macros: [{MACRO_FIRST}-{MACRO_LAST}], pmc: [{pmc}]}}")
+    return (f"{{periods: {{status: {period_s}, macros: {period_s}, pmc: {period_s}, loads: {loads:g}, "
+            f"counters: {counters:g}}}, macros: [{MACRO_FIRST}-{MACRO_LAST}], pmc: [{pmc}]}}")

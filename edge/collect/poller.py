@@ -37,6 +37,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
+from edge.collect.answer_time import AnswerTime
 from edge.collect.axis_numbers import per_axis_numbers
 from edge.collect.changes import ChangeDetector
 from edge.collect.clock_feed import ClockFeed
@@ -120,6 +121,7 @@ class MachinePoller:
         self._metric_groups: tuple[pl.MachinePlan | None, dict[str, pl.Group]] = (None, {})
         self._clock = ClockFeed(machine.id, machine.zone, machine.max_skew_s)
         self.clock = self._clock.tracker
+        self._answer_time = AnswerTime()  # when the CNC answered a tick, for its stamp
         self._jitter_s = jitter_s
         self._changes = ChangeDetector()
         self._alarms = ActiveAlarmProjection()
@@ -288,6 +290,7 @@ class MachinePoller:
         self._changes = ChangeDetector(plan.deadbands())
         self._last_raw = [_NOTHING] * len(plan.reads)
         self._clock.new_session()
+        self._answer_time.reset()
         first = await self._tick(plan, frozenset(plan.periods))
         specs = [*plan.metrics(), DROPPED_FUNCTIONS, *PLANT_STATE_SPECS]
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
@@ -400,12 +403,14 @@ class MachinePoller:
         self.stats.ticks += 1
         if pl.Group.STATUS in groups:
             self.stats.status_reads += 1
-        self.stats.record_cycle(mono_after - mono_before)
+        rtt = mono_after - mono_before
+        self.stats.record_cycle(rtt)
         mid_mono = (mono_before + mono_after) / 2
         mid_wall = (wall_before + wall_after) / 2
         self._read_at_by_due[groups] = mid_wall
-        clock_observed = self._observe_clock(results[-1], mid_mono, mid_wall, (mono_after - mono_before) / 2)
-        timestamp = self.clock.source_time_ms(mid_mono, mid_wall)
+        clock_observed = self._observe_clock(results[-1], mid_mono, mid_wall, rtt / 2)
+        answered = self._answer_time.half_rtt(rtt)  # not later for the gateway's own delay (answer_time)
+        timestamp = self.clock.source_time_ms(mono_before + answered, wall_before + answered)
 
         samples: list[Sample] = []
         events: list[Sample] = []

@@ -26,7 +26,7 @@ from edge.config.service_access import current_account, owner_of, state_dir_prob
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
 from edge.service.fd_limit import ensure_fd_limit, fds_needed
-from edge.service.gc_tuning import tune_collector
+from edge.service.gc_tuning import CollectorKeeper, tune_collector
 from edge.service.opcua_output import opcua_output
 from edge.service.outputs import Outputs
 from edge.service.sdnotify import SystemdNotifier
@@ -79,6 +79,8 @@ class Daemon:
         self._reload_requested = asyncio.Event()
         self._started = time.monotonic()
         self.status_http: StatusServer | None = None
+        # run_daemon sets it (the process is the daemon's alone): freezes the machines' objects once born
+        self.collector: CollectorKeeper | None = None
 
     def _take_state_dir(self) -> StateDirLock:
         """One daemon per state_dir, and only one whose user can read and write every file in it.
@@ -124,6 +126,8 @@ class Daemon:
         spread = max(1.0, len(devices) / STARTS_PER_S)  # a fleet's first connects spread, not in one burst
         for machine in devices:
             self._start_machine(machine, spread)
+        if self.collector is not None:
+            self.collector.machines_started()
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
         background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
@@ -134,6 +138,8 @@ class Daemon:
         interval = self.notifier.watchdog_interval()
         if interval:
             background.append(asyncio.create_task(self._watchdog_loop(interval), name="watchdog"))
+        if self.collector is not None:
+            background.append(asyncio.create_task(self.collector.run(), name="collector-keeper"))
         try:
             while not self._stop.is_set():
                 reload_wait = asyncio.create_task(self._reload_requested.wait())
@@ -284,6 +290,8 @@ class Daemon:
                 self.trends.forget(machine_id)
         for machine_id in changed + added:
             self._start_machine(fresh[machine_id])
+        if self.collector is not None and (changed or added):
+            self.collector.machines_started()
         log.info("reloaded added=%s removed=%s changed=%s", added, removed, changed)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
 
@@ -390,6 +398,7 @@ def run_daemon(config_path: Path, configure: Callable[[Daemon], None] | None = N
 
     async def main() -> int:
         daemon = Daemon(config, config_path)
+        daemon.collector = CollectorKeeper(lambda: all(p.online for p in daemon.pollers.values()))
         if configure is not None:
             configure(daemon)
         tune_collector()
