@@ -63,7 +63,7 @@ def _operation(level: str, cnc: FocasClient) -> Callable[[], Awaitable[Any]]:
     if level == "client batch":
         return lambda: cnc.batch(items)
     # The bench reaches into the client on purpose: the PDU it prepares for the tick, sent as it is.
-    data = cnc._prepare(items).pdus[0].data
+    data = cnc._prepare(items).pdus[0].layout.data
     return lambda: cnc._roundtrip(data, PduType.DATA_RESPONSE, "floor")
 
 

@@ -137,7 +137,6 @@ class MachinePoller:
         self._grid = grid or TickGrid()
         self._batches: dict[frozenset[pl.Group], TickBatch] = {}  # by the groups read in the tick
         self._by_due: dict[AbstractSet[pl.Group], TickBatch] = {}  # by the groups the schedule said were due
-        self._extractors: dict[int, pl.ValueExtractor] = {}  # id(read) of the current plan's reads
         self._batches_plan: pl.MachinePlan | None = None
         # Per read of the current plan (by index in plan.reads), its last good result: a read whose
         # result is that very object again did not move (the client hands an unchanged answer's value back).
@@ -370,7 +369,6 @@ class MachinePoller:
         if self._batches_plan is not plan:
             self._batches.clear()
             self._by_due.clear()
-            self._extractors.clear()
             self._batches_plan = plan
             self._last_raw = [_NOTHING] * len(plan.reads)  # indices changed: every read counts as moved
         batch = self._by_due.get(groups)  # the schedule hands out one frozenset per combination
@@ -381,17 +379,10 @@ class MachinePoller:
         if batch is None:
             reads = plan.reads_for(key)
             index = {id(read): i for i, read in enumerate(plan.reads)}
-            batch = TickBatch.build(reads, self._extractor, [index[id(read)] for read in reads])
+            batch = TickBatch.shared(reads, [index[id(read)] for read in reads])
             self._batches[key] = batch
         self._by_due[frozenset(groups)] = batch
         return batch
-
-    def _extractor(self, read: pl.PlannedRead) -> pl.ValueExtractor:
-        """One extractor per read of the plan, shared by every combination of groups it appears in."""
-        found = self._extractors.get(id(read))
-        if found is None:
-            found = self._extractors[id(read)] = pl.shared_value_extractor(read)
-        return found
 
     async def _tick(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickResult:
         """One batched round trip for the due groups; the samples returned are the changes only."""

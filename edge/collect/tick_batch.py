@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from edge.collect import plan as pl
 from edge.focas import items as it
 
+SHARED_LIMIT = 4096  # distinct (reads, positions) kept to share; a fleet of a few models needs a few dozen
+
 
 class ReadKind(enum.Enum):
     """What a tick does with a read's result beyond publishing its values."""
@@ -64,3 +66,21 @@ class TickBatch:
         return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
                    tuple(extractor(r) for r in reads), where, tuple(pl.elementwise(r) for r in reads), previous,
                    range(len(reads)))
+
+    @classmethod
+    def shared(cls, reads: Sequence[pl.PlannedRead], positions: Sequence[int]) -> TickBatch:
+        """build, with the process's shared extractors, as one object for every poller asking the same reads at
+        the same positions: machines polling alike share their plan's reads (MachinePlan.build), and a batch
+        holds nothing of one machine (its last results stay in the poller); a copy each was ~5 kB a machine.
+        The key's reads are held by the batch, so their ids stay theirs while the entry lives."""
+        key = (*map(id, reads), -1, *positions)
+        found = _SHARED.get(key)
+        if found is None:
+            found = cls.build(reads, pl.shared_value_extractor, positions)
+            if len(_SHARED) >= SHARED_LIMIT:
+                _SHARED.clear()
+            _SHARED[key] = found
+        return found
+
+
+_SHARED: dict[tuple[int, ...], TickBatch] = {}

@@ -14,7 +14,7 @@ import contextlib
 import logging
 import struct
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
 from typing import cast
@@ -30,7 +30,10 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import (
+    Answer,
+    AnswerMemo,
     AnswerSplitter,
+    Echo,
     Frame,
     FrameDecoder,
     PduType,
@@ -40,6 +43,8 @@ from edge.focas.frame import (
     encode_close_request,
     encode_open_request,
     encode_request,
+    intern_ints,
+    slot_getter,
 )
 from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
@@ -55,7 +60,6 @@ DEFAULT_PORT = 8193
 MAX_SUBPACKETS = 32
 CLOSE_TIMEOUT = 1.0
 WRITE_OPERATIONS = frozenset({"write_macro", "write_pmc", "set_clock"})
-PLAN_CACHE_SIZE = 1024  # a poll plan repeats the same few dozen items every tick
 PREPARED_CACHE_SIZE = 16  # a poller repeats one or a few item tuples (one per combination of due groups)
 
 
@@ -127,32 +131,89 @@ SingleCall = tuple[PayloadDecoder, RequestSubpacket, str]  # (payload decoder, i
 
 
 @dataclass(frozen=True, slots=True)
-class PreparedPdu:
-    """One request PDU of a batch, encoded, with the items it serves and what it last got back."""
+class PduLayout:
+    """One request PDU of a batch, encoded, with the items it serves: the same for every session that asks
+    the same item plans (plans are shared too), so machines polling alike hold one copy."""
 
     data: bytes
-    requests: tuple[RequestSubpacket, ...]
-    items: tuple[tuple[int, ItemPlan], ...]  # (index in the batch, plan), in subpacket order
-    starts: tuple[int, ...]  # per entry of `items`, the index of its first answer subpacket
+    plans: tuple[ItemPlan, ...]  # per entry (an item of the PDU), in subpacket order
+    indices: tuple[int, ...]  # per entry, its index in the batch
+    starts: tuple[int, ...]  # per entry, the index of its first answer subpacket
     single: tuple[SingleCall | None, ...]  # per entry: its one call, when that call's value is the item's
-    owners: tuple[int, ...]  # per request subpacket, the entry of `items` it serves
-    splitter: AnswerSplitter  # the last answer, to find the subpackets that moved
-    stale: set[int]  # entries of `items` to decode on the next answer whatever moved (new, or an error)
+    owners: tuple[int, ...]  # per request subpacket, the entry it serves
+    echoes: tuple[Echo, ...]  # per request subpacket, what its answer echoes
+
+
+LAYOUTS_LIMIT = 4096  # distinct batches of plans kept to share; a fleet of a few models needs a few dozen
+_LAYOUTS: dict[tuple[int, ...], tuple[PduLayout, ...]] = {}
+
+
+class SessionValues:
+    """What a session last got for each item it asks, shared by every batch it repeats (a poller's tick
+    shapes overlap: most items are in all of them), so each item's last answer and value are held once.
+
+    A value slot is one item plan (its k-th occurrence in a batch takes the plan's k-th slot); its calls
+    take consecutive slots of `answers`. `stale` holds the value slots whose value is an error (decoded
+    again on every answer)."""
+
+    __slots__ = ("answers", "first_piece", "plans", "stale", "values")
+
+    def __init__(self) -> None:
+        self.answers = AnswerMemo()
+        self.values: list[ItemResult] = []
+        self.plans: list[ItemPlan] = []  # per value slot
+        self.first_piece: list[int] = []  # per value slot, its first slot in `answers`
+        self.stale: set[int] = set()
+
+    def slots_for(self, plans: Sequence[ItemPlan]) -> list[int]:
+        """Per plan of a batch, its value slot (new slots for plans, or occurrences, not seen before)."""
+        known: dict[int, list[int]] = {}
+        for slot, plan in enumerate(self.plans):
+            known.setdefault(id(plan), []).append(slot)
+        used: dict[int, int] = {}
+        slots = []
+        for plan in plans:
+            nth = used[id(plan)] = used.get(id(plan), -1) + 1
+            mine = known.get(id(plan), [])
+            if nth < len(mine):
+                slots.append(mine[nth])
+                continue
+            slots.append(len(self.plans))
+            self.plans.append(plan)
+            self.values.append(None)
+            self.first_piece.append(self.answers.allocate(len(plan.calls)).start)
+        return slots
+
+    def pieces_of(self, slots: Sequence[int]) -> tuple[int, ...]:
+        """The answer slots of these value slots' calls, in subpacket order."""
+        return tuple(first + call for slot in slots
+                     for first in (self.first_piece[slot],) for call in range(len(self.plans[slot].calls)))
+
+
+@dataclass(frozen=True, slots=True)
+class PreparedPdu:
+    """One request PDU of a batch as this session sends it: the shared layout, and where its answers and values
+    live in the session's SessionValues."""
+
+    layout: PduLayout
+    splitter: AnswerSplitter | None  # None: nothing asked (every entry's plan is its error)
+    slots: tuple[int, ...]  # per entry, its value slot
 
 
 @dataclass(frozen=True, slots=True)
 class PreparedBatch:
-    """A batch a caller repeats: its PDUs, and per item the value decoded from the last answers.
+    """A batch a caller repeats: its PDUs, and where each item's value from the last answers is kept.
 
     Decoding is a pure function of (answer, request, context), so an item none of whose answer
     subpackets moved keeps its value, the very same object, without decoding (most reads of a poll tick
-    do not change), and a caller can tell "unchanged" by identity. An item whose value is an error is
-    decoded again every time."""
+    do not change), and a caller can tell "unchanged" by identity, across batches too (an item's value is
+    kept once per session). An item whose value is an error is decoded again every time."""
 
     items: Sequence[it.ReadItem]
     context: Context
+    memo: SessionValues
     pdus: tuple[PreparedPdu, ...]
-    values: list[ItemResult]  # per item, its value from the last answers
+    results: Callable[[Sequence[ItemResult]], tuple[ItemResult, ...]]  # the memo's values -> the batch's, in order
 
 
 class FocasClient(CncSession):
@@ -175,9 +236,8 @@ class FocasClient(CncSession):
         self.pdus_sent = 0
         self._stream: FrameStream | None = None
         self._in_flight = False
-        self._plans: dict[tuple[it.ReadItem, Context], ItemPlan] = {}
         self._prepared: dict[int, PreparedBatch] = {}
-        self._shared: dict[int, tuple[ItemPlan, object]] = {}  # id(plan) -> (plan, its last decoded value)
+        self._memo = SessionValues()  # for the batches of _prepared, all of this context
 
     def describe(self) -> str:
         return f"focas://{self.host}:{self.port}"
@@ -223,46 +283,56 @@ class FocasClient(CncSession):
     async def _batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
         prepared = self._prepare(items)
         context = self.context
-        values = prepared.values
+        memo = prepared.memo
+        values, stale = memo.values, memo.stale
         for pdu in prepared.pdus:
-            stale = pdu.stale
-            if pdu.requests:
-                frame = await self._roundtrip(pdu.data, PduType.DATA_RESPONSE, "data request")
+            splitter, slots = pdu.splitter, pdu.slots
+            body = b""
+            answers: Sequence[Answer | None]
+            if splitter is not None:
+                frame = await self._roundtrip(pdu.layout.data, PduType.DATA_RESPONSE, "data request")
+                body = frame.body
                 try:
-                    answers, moved = pdu.splitter.split(frame.body)
+                    answers, moved = splitter.split(body)
                 except ProtocolError as exc:
                     raise ProtocolError(f"{self.describe()}: {exc}") from None
             else:  # nothing asked: every item's plan is its error
-                answers, moved = [], []
+                answers, moved = (), None
+            todo: Iterable[int]
             if moved is None:
-                todo: Iterable[int] = range(len(pdu.items))
-            elif moved or stale:
-                owners = pdu.owners
-                todo = stale.union([owners[i] for i in moved])
+                todo = range(len(slots))
+            elif moved:
+                owners = pdu.layout.owners
+                todo = {owners[i] for i in moved}
+                if stale:
+                    todo.update(entry for entry, slot in enumerate(slots) if slot in stale)
+            elif stale and not stale.isdisjoint(slots):
+                todo = [entry for entry, slot in enumerate(slots) if slot in stale]
             else:
                 continue
-            starts, entries, single, shared = pdu.starts, pdu.items, pdu.single, self._shared
+            layout = pdu.layout
+            starts, plans, single = layout.starts, layout.plans, layout.single
             for entry in todo:
-                index, plan = entries[entry]
-                call = single[entry]
+                plan, start, call = plans[entry], starts[entry], single[entry]
                 if call is None:
-                    value = item_value(plan, answers, starts[entry], context)
+                    value = item_value(plan, _answered(answers, splitter, body, start, len(plan.calls)), 0, context)
                 else:  # the common item, one call whose value is the item's: without item_value's loop
+                    answer = answers[start] if answers else None
+                    if answer is None:  # not moved, decoded again (its value was an error)
+                        answer = cast(AnswerSplitter, splitter).answer(body, start)
                     decode, request, name = call
-                    value = call_value(decode, name, request, answers[starts[entry]], context)
+                    value = call_value(decode, name, request, answer, context)
+                slot = slots[entry]
                 if isinstance(value, FocasError):
-                    stale.add(entry)
+                    stale.add(slot)
                 else:
-                    stale.discard(entry)
-                    # Another batch with this item (a poller's tick shapes overlap) may hold an equal value:
-                    # hand back that object, so "unchanged" stays an identity check across shapes too.
-                    known = shared.get(id(plan))
-                    if known is not None and known[0] is plan and known[1] == value:
-                        value = known[1]
-                    else:
-                        shared[id(plan)] = (plan, value)
-                values[index] = value
-        return values.copy()
+                    stale.discard(slot)
+                    # An equal value (the item asked in another batch, or its bytes moved but not its value)
+                    # is handed back as the object kept: "unchanged" stays an identity check.
+                    if values[slot] == value:
+                        value = values[slot]
+                values[slot] = value
+        return list(prepared.results(values))
 
     async def _write_macro(self, number: int, value: float) -> None:
         """cmd 0x16 with an exact decimal; cmd 0xa8 (IEEE double) only when no i32 mantissa can carry it."""
@@ -299,55 +369,48 @@ class FocasClient(CncSession):
         await self._call(fn.SET_TIME, request)
 
     # ---- plumbing ---------------------------------------------------------------------------------------
-    def _plan(self, item: it.ReadItem) -> ItemPlan:
-        """plan_item is pure, and a poll repeats the same items every tick: plan each once per context.
-
-        Building the request subpackets was 12% of the gateway's CPU at 200 machines (bench fleet).
-        """
-        key = (item, self.context)
-        plan = self._plans.get(key)
-        if plan is None:
-            plan = shared_plan_item(item, self.context, self.path)
-            if len(self._plans) >= PLAN_CACHE_SIZE:
-                self._plans.clear()
-                self._shared.clear()
-            self._plans[key] = plan
-        return plan
-
     def _prepare(self, items: Sequence[it.ReadItem]) -> PreparedBatch:
         """The batch's PDUs; built once per tuple of items a caller repeats (a poller's tick), per session.
 
         Only tuples are kept (a list could change under the cache); the cache pins the tuple, so its
-        identity cannot be reused by another object while the entry lives.
+        identity cannot be reused by another object while the entry lives. A batch of a list is built with
+        a memo of its own, kept by nobody.
         """
         if type(items) is not tuple:
-            return self._build_batch(items)
+            return self._build_batch(items, SessionValues())
         prepared = self._prepared.get(id(items))
         if prepared is None or prepared.items is not items or prepared.context is not self.context:
-            prepared = self._build_batch(items)
-            if len(self._prepared) >= PREPARED_CACHE_SIZE:
+            if len(self._prepared) >= PREPARED_CACHE_SIZE or any(
+                    p.context is not self.context for p in self._prepared.values()):
                 self._prepared.clear()
+                self._memo = SessionValues()
+            prepared = self._build_batch(items, self._memo)
             self._prepared[id(items)] = prepared
         return prepared
 
-    def _build_batch(self, items: Sequence[it.ReadItem]) -> PreparedBatch:
-        plans = [self._plan(item) for item in items]
+    def _build_batch(self, items: Sequence[it.ReadItem], memo: SessionValues) -> PreparedBatch:
+        # plan_item is pure and a poll repeats the same items every tick: plans (and their request subpackets)
+        # come from the process's shared cache (building them was 12% of the CPU at 200 machines).
+        plans = [shared_plan_item(item, self.context, self.path) for item in items]
+        value_slots = memo.slots_for(plans)
         pdus = []
-        for group in self._groups(plans):
-            requests = [req for _, plan in group for req in plan.requests]
-            starts: list[int] = []
-            owners: list[int] = []
-            for entry, (_, plan) in enumerate(group):
-                starts.append(len(owners))
-                owners += [entry] * len(plan.calls)
-            single = tuple((plan.calls[0][0].decode_payload, plan.calls[0][1], plan.calls[0][0].name)
-                           if plan.error is None and len(plan.calls) == 1 and plan.combine is first_value else None
-                           for _, plan in group)
-            pdus.append(PreparedPdu(encode_request(requests) if requests else b"", tuple(requests), tuple(group),
-                                    tuple(starts), single, tuple(owners),
-                                    AnswerSplitter([(req.cls, req.path, req.command) for req in requests]),
-                                    set(range(len(group)))))
-        return PreparedBatch(items, self.context, tuple(pdus), [None] * len(items))
+        for layout in self._layouts(plans):
+            slots = intern_ints(tuple(value_slots[index] for index in layout.indices))
+            splitter = AnswerSplitter(layout.echoes, memo.pieces_of(slots), memo.answers) if layout.echoes else None
+            pdus.append(PreparedPdu(layout, splitter, slots))
+        return PreparedBatch(items, self.context, memo, tuple(pdus), slot_getter(intern_ints(tuple(value_slots))))
+
+    def _layouts(self, plans: list[ItemPlan]) -> tuple[PduLayout, ...]:
+        """The PDUs for these plans, shared by every session asking the same ones (the key's plans are held by
+        the value, so their ids stay theirs while the entry lives)."""
+        key = (self.max_subpackets, *map(id, plans))
+        found = _LAYOUTS.get(key)
+        if found is None:
+            found = tuple(_pdu_layout(group) for group in self._groups(plans))
+            if len(_LAYOUTS) >= LAYOUTS_LIMIT:
+                _LAYOUTS.clear()
+            _LAYOUTS[key] = found
+        return found
 
     def _groups(self, plans: list[ItemPlan]) -> list[list[tuple[int, ItemPlan]]]:
         """Items in order, packed into PDUs of at most max_subpackets subpackets."""
@@ -401,3 +464,28 @@ class FocasClient(CncSession):
             frame = await stream.next_frame()
             if frame.type == PduType.CLOSE_RESPONSE:
                 return
+
+
+def _pdu_layout(group: list[tuple[int, ItemPlan]]) -> PduLayout:
+    requests = [req for _, plan in group for req in plan.requests]
+    starts: list[int] = []
+    owners: list[int] = []
+    for entry, (_, plan) in enumerate(group):
+        starts.append(len(owners))
+        owners += [entry] * len(plan.calls)
+    single = tuple((plan.calls[0][0].decode_payload, plan.calls[0][1], plan.calls[0][0].name)
+                   if plan.error is None and len(plan.calls) == 1 and plan.combine is first_value else None
+                   for _, plan in group)
+    return PduLayout(encode_request(requests) if requests else b"", tuple(plan for _, plan in group),
+                     intern_ints(tuple(index for index, _ in group)), intern_ints(tuple(starts)), single,
+                     intern_ints(tuple(owners)), tuple((req.cls, req.path, req.command) for req in requests))
+
+
+def _answered(answers: Sequence[Answer | None], splitter: AnswerSplitter | None, body: bytes, start: int,
+              count: int) -> list[Answer]:
+    """The answers of subpackets start..start+count-1 (an item of several calls), parsing those not parsed yet."""
+    got = []
+    for index in range(start, start + count):
+        answer = answers[index] if answers else None
+        got.append(cast(AnswerSplitter, splitter).answer(body, index) if answer is None else answer)
+    return got

@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import enum
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from itertools import compress, pairwise
-from operator import not_
+from itertools import compress
+from operator import itemgetter, not_
+from typing import Any
 
 from edge.focas.errors import ProtocolError
 
@@ -243,59 +244,164 @@ def _one_answer(body: bytes, offset: int, index: int, echo: Echo) -> tuple[Answe
     return (rc, detail, body[offset + RESPONSE_SUBPACKET_FIXED : offset + length]), length
 
 
-class AnswerSplitter:
-    """split_response for the answers to ONE repeated request PDU (a poll tick), remembering the last.
+NOT_ANSWERED = b""  # a slot no answer filled yet: no subpacket is 0 bytes long, so a PDU holding it splits anew
+INTERN_LIMIT = 65536  # distinct small tuples kept to share; a fleet of alike machines needs a few dozen
+_INTERNED: dict[tuple[int, ...], tuple[int, ...]] = {}
+_GETTERS: dict[tuple[int, ...], Callable[[Sequence[Any]], tuple[Any, ...]]] = {}
 
-    Most subpackets of a poll answer repeat byte for byte, at the same offsets. While the body keeps its
-    size and count, each of the last answer's subpackets is compared in place with the bytes at its
-    offset, in C; only a subpacket that differs is parsed (and checked) again, and an unchanged one
-    gives back its previous Answer, the same object. A changed piece whose length moved, or a body of
-    another size, is split from scratch. `split` also says which subpackets moved (None: all of them).
+
+def intern_ints(values: tuple[int, ...]) -> tuple[int, ...]:
+    """One tuple object for every equal tuple of numbers (slots, offsets, lengths): machines polling alike
+    hold the same ones, and a copy per machine and tick shape is memory for nothing."""
+    found = _INTERNED.get(values)
+    if found is None:
+        if len(_INTERNED) >= INTERN_LIMIT:
+            _INTERNED.clear()
+        found = _INTERNED[values] = values
+    return found
+
+
+def slot_getter(slots: tuple[int, ...]) -> Callable[[Sequence[Any]], tuple[Any, ...]]:
+    """`lambda seq: tuple(seq[s] for s in slots)`, in C (operator.itemgetter), and one per distinct tuple."""
+    getter = _GETTERS.get(slots)
+    if getter is None:
+        if len(_GETTERS) >= INTERN_LIMIT:
+            _GETTERS.clear()
+        if len(slots) == 1:
+            getter = _one_slot_getter(slots[0])
+        elif slots:
+            getter = itemgetter(*slots)
+        else:
+            getter = _no_slots
+        _GETTERS[slots] = getter
+    return getter
+
+
+def _one_slot_getter(slot: int) -> Callable[[Sequence[Any]], tuple[Any, ...]]:
+    return lambda seq: (seq[slot],)
+
+
+def _no_slots(seq: Sequence[Any]) -> tuple[Any, ...]:
+    return ()
+
+
+class AnswerMemo:
+    """One session's last answer bytes of every subpacket slot, shared by all its request PDUs.
+
+    A poller's ticks send a few combinations of its groups (tick shapes), and most subpackets are in all of
+    them: one copy of each subpacket's last answer per session, not one per shape. A slot is one call of one
+    item; `generation` counts the changes of any slot's length, which moves the layout of every PDU that
+    holds the slot (each AnswerSplitter checks its lengths again when it sees a new generation).
     """
 
-    def __init__(self, echoes: Sequence[Echo]) -> None:
-        self.echoes = tuple(echoes)
-        self._size = -1  # no answer yet
-        self._head = b""
-        self._offsets: tuple[int, ...] = ()
-        self._pieces: list[bytes] = []
-        self._answers: list[Answer] = []
-        self._indices = range(len(self.echoes))
+    __slots__ = ("generation", "pieces")
 
-    def split(self, body: bytes) -> tuple[list[Answer], list[int] | None]:
-        """The answers (a list the caller may keep, not change) and the indices that moved."""
+    def __init__(self) -> None:
+        self.pieces: list[bytes] = []
+        self.generation = 0
+
+    def allocate(self, count: int) -> range:
+        """`count` new slots, not answered yet."""
+        start = len(self.pieces)
+        self.pieces += [NOT_ANSWERED] * count
+        return range(start, start + count)
+
+
+class AnswerSplitter:
+    """split_response for the answers to ONE repeated request PDU (a poll tick), against the last answers.
+
+    Most subpackets of a poll answer repeat byte for byte, at the same offsets. While the body keeps its
+    size and count, each slot's last answer (in the session's AnswerMemo, whichever PDU brought it) is
+    compared in place with the bytes at its offset, in C; only a subpacket that differs is parsed (and
+    checked) again. A changed piece whose length moved, or a body of another size, is split from scratch.
+    `split` says which subpackets moved (None: all of them) and gives their answers; `answer` parses any
+    other subpacket of the same body when a caller needs it (an item with several calls, an error retried).
+    Per PDU only numbers are kept (offsets and lengths, shared between equal layouts), no answer.
+    """
+
+    __slots__ = ("_echoes", "_generation", "_get", "_head", "_indices", "_lengths", "_memo", "_offsets",
+                 "_size", "_slots")
+
+    def __init__(self, echoes: Sequence[Echo], slots: tuple[int, ...], memo: AnswerMemo) -> None:
+        if len(slots) != len(echoes):
+            raise ValueError(f"{len(slots)} answer slots for {len(echoes)} subpackets")
+        self._echoes = tuple(echoes)
+        self._slots = intern_ints(slots)
+        self._get = slot_getter(self._slots)
+        self._memo = memo
+        self._head = _count_word(len(self._echoes))
+        self._indices = range(len(self._echoes))
+        self._size = -1  # no answer yet
+        self._offsets: tuple[int, ...] = ()
+        self._lengths: tuple[int, ...] = ()
+        self._generation = -1
+
+    def split(self, body: bytes) -> tuple[Sequence[Answer | None], list[int] | None]:
+        """Which subpackets moved since their last answers (None: all of them, after a split from scratch) and,
+        per subpacket, its answer where it was parsed (every one when all moved; None where it did not move)."""
+        memo = self._memo
         if len(body) == self._size and body.startswith(self._head):
+            last = self._get(memo.pieces)
+            if self._generation != memo.generation:  # a slot's length changed: do the lengths still fit?
+                if tuple(map(len, last)) != self._lengths:
+                    return self._split_anew(body), None
+                self._generation = memo.generation
             offsets = self._offsets
             # Each last piece compared in place (no slicing): which subpackets are not what they were.
-            moved = list(compress(self._indices, map(not_, map(body.startswith, self._pieces, offsets))))
+            moved = list(compress(self._indices, map(not_, map(body.startswith, last, offsets))))
             if not moved:
-                return self._answers, moved
-            answers = self._answers.copy()
-            pieces = self._pieces.copy()
+                return (), moved
+            lengths, echoes = self._lengths, self._echoes
+            parsed = []
             for index in moved:
-                answer, length = _one_answer(body, offsets[index], index, self.echoes[index])
-                if length != len(pieces[index]):
+                answer, length = _one_answer(body, offsets[index], index, echoes[index])
+                if length != lengths[index]:
                     break  # the layout moved: split from scratch
-                answers[index] = answer
-                pieces[index] = body[offsets[index] : offsets[index] + length]
+                parsed.append(answer)
             else:
-                self._pieces, self._answers = pieces, answers
+                answers: list[Answer | None] = [None] * len(offsets)
+                pieces, slots = memo.pieces, self._slots
+                for index, answer in zip(moved, parsed, strict=True):
+                    answers[index] = answer
+                    start = offsets[index]
+                    pieces[slots[index]] = body[start : start + lengths[index]]
                 return answers, moved
         return self._split_anew(body), None
 
+    def answer(self, body: bytes, index: int) -> Answer:
+        """Subpacket `index` of the body `split` was just given."""
+        return _one_answer(body, self._offsets[index], index, self._echoes[index])[0]
+
     def _split_anew(self, body: bytes) -> list[Answer]:
         self._size = -1  # until this answer is known good
-        answers = split_response(body, self.echoes)
-        offsets, offset = [], 2
+        answers = split_response(body, self._echoes)
+        offsets, lengths, offset = [], [], 2
         for _rc, _detail, payload in answers:
             offsets.append(offset)
-            offset += RESPONSE_SUBPACKET_FIXED + len(payload)
-        bounds = [*offsets, offset]
-        self._offsets = tuple(offsets)
-        self._pieces = [body[a:b] for a, b in pairwise(bounds)]
-        self._answers = answers
-        self._head, self._size = body[:2], len(body)
+            lengths.append(RESPONSE_SUBPACKET_FIXED + len(payload))
+            offset += lengths[-1]
+        memo = self._memo
+        pieces = memo.pieces
+        moved_layout = False
+        for slot, start, length in zip(self._slots, offsets, lengths, strict=True):
+            moved_layout = moved_layout or len(pieces[slot]) != length
+            pieces[slot] = body[start : start + length]
+        if moved_layout:
+            memo.generation += 1
+        self._generation = memo.generation
+        self._offsets, self._lengths = intern_ints(tuple(offsets)), intern_ints(tuple(lengths))
+        self._size = len(body)
         return answers
+
+
+_COUNT_WORDS: dict[int, bytes] = {}
+
+
+def _count_word(count: int) -> bytes:
+    word = _COUNT_WORDS.get(count)
+    if word is None:
+        word = _COUNT_WORDS[count] = U16_LAYOUT.pack(count)
+    return word
 
 
 # ---- whole PDUs -----------------------------------------------------------------------------------------

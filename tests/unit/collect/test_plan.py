@@ -199,3 +199,18 @@ def test_machines_polling_alike_share_reads_and_extractors_but_each_session_gets
     read = a.reads_for([Group.MACROS])[0]
     assert shared_value_extractor(read) is shared_value_extractor(b.reads_for([Group.MACROS])[0])
     assert shared_value_extractor(read)([1.0, 2.0, 3.0]) == value_extractor(read)([1.0, 2.0, 3.0])
+
+
+def test_machines_polling_alike_share_their_tick_batches() -> None:
+    from edge.collect.tick_batch import TickBatch
+
+    config = parse_config(CONFIG, "t", {})
+    a = MachinePlan.build(poll_settings(config.machines[0].poll, config.alarms), STATIC)
+    b = MachinePlan.build(poll_settings(parse_config(CONFIG, "t", {}).machines[0].poll, config.alarms), STATIC)
+    reads_a, reads_b = a.reads_for([Group.MACROS, Group.STATUS]), b.reads_for([Group.MACROS, Group.STATUS])
+    positions = [a.reads.index(read) for read in reads_a]
+    shared = TickBatch.shared(reads_a, positions)
+    assert TickBatch.shared(reads_b, positions) is shared  # one batch, its request items one tuple
+    built = TickBatch.build(reads_a, shared_value_extractor, positions)
+    assert (shared.items, shared.extractors, shared.positions) == (built.items, built.extractors, built.positions)
+    assert TickBatch.shared(reads_a, [p + 1 for p in positions]) is not shared, "other positions, another batch"

@@ -395,6 +395,39 @@ async def test_batches_sharing_an_item_share_what_was_last_answered(cnc: Scripte
     assert second[0] == [1.25, None] and third[0] == [3.0, None]
 
 
+async def test_tick_shapes_keep_one_last_answer_per_item_and_see_each_others_changes(cnc: ScriptedCnc) -> None:
+    """Each item's last answer is kept once per session, whichever batch asked it: a change one batch brought
+    and that was undone before the other batch asks again is decoded again there (its bytes differ from the
+    last answer the session holds), and an item asked twice in one batch is answered twice."""
+    macros, feed = it.ReadMacros(500, 501), it.ReadFeed()
+    small, large = (macros, it.ReadClock()), (macros, feed, it.ReadClock(), feed)
+    async with client_for(cnc) as client:
+        first = await client.batch(small)
+        cnc.macros[500] = 3.0
+        second = await client.batch(large)
+        cnc.macros[500] = 1.25
+        third = await client.batch(small)
+        fourth = await client.batch(large)
+        pieces = len(client._memo.answers.pieces)
+    assert first[0] == third[0] == fourth[0] == [1.25, None] and second[0] == [3.0, None]
+    assert second[1] == second[3] == fourth[1] == 1250.5
+    assert fourth[0] is third[0]  # unchanged since the other batch asked: the same object
+    assert pieces == 5  # macros, the clock's date and time, feed twice: once each, not once per batch
+
+
+async def test_sessions_polling_alike_share_the_request_bytes_not_the_values(cnc: ScriptedCnc) -> None:
+    batch = (it.ReadMacros(500, 501), it.ReadClock())
+    async with client_for(cnc) as one, client_for(cnc) as other:
+        await one.batch(batch)
+        first = await other.batch(batch)
+        cnc.macros[500] = 7.0
+        second = await other.batch(batch)
+        (pdu_one,), (pdu_other,) = one._prepare(batch).pdus, other._prepare(batch).pdus
+    assert pdu_one.layout is pdu_other.layout  # one encoded request for both machines
+    assert first[0] == [1.25, None] and second[0] == [7.0, None]
+    assert one._memo is not other._memo
+
+
 async def test_a_list_batch_is_decoded_every_time(cnc: ScriptedCnc) -> None:
     batch = [it.ReadMacros(500, 501)]  # a list may change between calls: never cached
     async with client_for(cnc) as client:

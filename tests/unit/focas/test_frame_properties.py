@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import pytest
@@ -13,6 +14,8 @@ from hypothesis import strategies as st
 
 from edge.focas.errors import ProtocolError
 from edge.focas.frame import (
+    Answer,
+    AnswerMemo,
     AnswerSplitter,
     FrameDecoder,
     RequestSubpacket,
@@ -165,35 +168,45 @@ def test_property_split_response_rejects_a_truncated_body(subs: list[ResponseSub
         split_response(body + b"\x00", echoes)
 
 
-@given(st.lists(st.tuples(u16, u16, u16), min_size=1, max_size=5), st.data())
-def test_property_answer_splitter_answers_as_a_fresh_split(echoes: list[tuple[int, int, int]],
-                                                           data: st.DataObject) -> None:
-    """A run of answers to one request (some subpackets repeating, some changed in content or length,
-    some bodies malformed): the splitter gives what a fresh split gives, or the same error; an unchanged
-    subpacket comes back as the very same Answer object, and `moved` names exactly the ones that are not."""
-    splitter = AnswerSplitter(echoes)
-    previous: list[tuple[int, int, bytes]] | None = None
+def _all_answers(splitter: AnswerSplitter, body: bytes, answers: Sequence[Answer | None]) -> list[Answer]:
+    """What `split` gave, with the subpackets it did not parse asked for one by one."""
+    return [(answers[i] if answers else None) or splitter.answer(body, i) for i in range(len(splitter._slots))]
+
+
+@given(st.lists(st.tuples(u16, u16, u16), min_size=1, max_size=4, unique=True), st.data())
+def test_property_answer_splitters_sharing_a_memo_answer_as_a_fresh_split(echoes: list[tuple[int, int, int]],
+                                                                          data: st.DataObject) -> None:
+    """Two request PDUs (tick shapes) asking overlapping subpackets, their last answers kept once in one memo;
+    a run of answers to either (some subpackets repeating, some changed in content or length, some bodies
+    malformed): each splitter gives what a fresh split gives, or the same error, and `moved` names exactly
+    the subpackets that differ from the last answer of the same slot, whichever PDU brought it."""
+    memo = AnswerMemo()
+    slots = list(memo.allocate(len(echoes)))
+    shapes = [list(range(len(echoes))), data.draw(st.lists(st.sampled_from(range(len(echoes))), min_size=1,
+                                                            unique=True))]
+    splitters = [AnswerSplitter([echoes[i] for i in shape], tuple(slots[i] for i in shape), memo)
+                 for shape in shapes]
+    last: dict[int, Answer] = {}  # per slot, the last answer a split accepted
     payloads = st.sampled_from([b"", b"\x00\x01", b"\x00\x02", b"\x00\x01\x00\x00"])
-    for _ in range(data.draw(st.integers(1, 8))):
-        subs = [ResponseSubpacket(cls, command, data.draw(st.sampled_from([0, 0, 5])), 0, data.draw(payloads),
-                                  path) for cls, path, command in echoes]
+    for _ in range(data.draw(st.integers(1, 10))):
+        which = data.draw(st.integers(0, 1))
+        shape, splitter = shapes[which], splitters[which]
+        subs = [ResponseSubpacket(echoes[i][0], echoes[i][2], data.draw(st.sampled_from([0, 0, 5])), 0,
+                                  data.draw(payloads), echoes[i][1]) for i in shape]
         body = encode_response(subs)[10:]
         body = data.draw(st.sampled_from([body, body, body, body[:-1], body + b"\x00"]))
         try:
-            expected = split_response(body, echoes)
+            expected = split_response(body, [echoes[i] for i in shape])
         except ProtocolError as exc:
             with pytest.raises(ProtocolError, match=str(exc)[:20].replace("(", ".").replace(")", ".")):
                 splitter.split(body)
-            continue  # the splitter still compares with the last good answer
-        got, moved = splitter.split(body)
-        assert got == expected
-        if previous is None:
-            assert moved is None
-        elif moved is not None:
-            assert moved == [i for i, (old, new) in enumerate(zip(previous, got, strict=True)) if old != new]
-            assert all(old is new for i, (old, new) in enumerate(zip(previous, got, strict=True))
-                       if i not in moved)
-        previous = list(got)
+            continue  # the memo still holds the last good answers
+        answers, moved = splitter.split(body)
+        assert _all_answers(splitter, body, answers) == expected
+        if moved is not None:
+            assert moved == [n for n, i in enumerate(shape) if last.get(i) != expected[n]]
+            assert all(answers[n] == expected[n] for n in moved)
+        last.update(zip(shape, expected, strict=True))
 
 
 def test_answer_splitter_reparses_only_what_moved_and_notices_a_length_change() -> None:
@@ -203,13 +216,14 @@ def test_answer_splitter_reparses_only_what_moved_and_notices_a_length_change() 
         return encode_response([ResponseSubpacket(c, cmd, 0, 0, p, path)
                                 for (c, path, cmd), p in zip(echoes, payloads, strict=True)])[10:]
 
-    splitter = AnswerSplitter(echoes)
+    memo = AnswerMemo()
+    splitter = AnswerSplitter(echoes, tuple(memo.allocate(3)), memo)
     first, moved = splitter.split(body(b"\x00\x01", b"\x00\x02", b"\x00\x03"))
-    assert moved is None
+    assert moved is None and [a[2] for a in first] == [b"\x00\x01", b"\x00\x02", b"\x00\x03"]
     second, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
-    assert moved == [1] and second[0] is first[0] and second[2] is first[2] and second[1][2] == b"\x00\x09"
-    third, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
-    assert moved == [] and third is second
+    assert moved == [1] and second[1] == (0, 0, b"\x00\x09") and second[0] is None and second[2] is None
+    _, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
+    assert moved == []
     # Same total size, but the first two subpackets trade two bytes: the layout moved, split anew.
     fourth, moved = splitter.split(body(b"", b"\x00\x09\x00\x00", b"\x00\x03"))
     assert moved is None and [a[2] for a in fourth] == [b"", b"\x00\x09\x00\x00", b"\x00\x03"]
@@ -217,3 +231,27 @@ def test_answer_splitter_reparses_only_what_moved_and_notices_a_length_change() 
         splitter.split(encode_response([ResponseSubpacket(1, 0x99, 0, 0, b"", 1),
                                         *[ResponseSubpacket(c, cmd, 0, 0, p, path) for (c, path, cmd), p
                                           in zip(echoes[1:], (b"\x00\x09\x00\x00", b"\x00\x03"), strict=True)]])[10:])
+
+
+def test_a_length_changed_by_another_pdu_is_not_taken_for_an_unchanged_answer() -> None:
+    """PDU A asks slots 0 and 1, PDU B slot 0 alone. B's answer shortens slot 0; A's next answer has the same
+    size as its last, slot 0 equal to what B brought and slot 1 crafted so its old bytes reappear at the old
+    offset. Compared in place alone, A would find nothing moved and keep slot 1's old answer; the memo's
+    generation makes A check its lengths and split anew."""
+    echo = (0x14, 0x14, 0x14)
+    memo = AnswerMemo()
+    slot0, slot1 = memo.allocate(2)
+    a = AnswerSplitter([echo, echo], (slot0, slot1), memo)
+    b = AnswerSplitter([echo], (slot0,), memo)
+
+    def sub(rc: int, detail: int, payload: bytes) -> ResponseSubpacket:
+        return ResponseSubpacket(echo[0], echo[2], rc, detail, payload, echo[1])
+
+    a.split(encode_response([sub(0, 0, b"\x00\x00\x00\x01"), sub(0, 8, b"\x00\x00\x00\x04")])[10:])
+    b.split(encode_response([sub(0, 0, b"")])[10:])
+    crafted = encode_response([sub(0, 0, b""), sub(0x14, 0x14, b"\x00\x00\x00\x04\x00\x00\x00\x04")])[10:]
+    old_second = encode_response([sub(0, 8, b"\x00\x00\x00\x04")])[12:]
+    assert crafted[22:42] == old_second and len(crafted) == 42  # the trap: old bytes at the old offset
+    answers, moved = a.split(crafted)
+    assert moved is None and list(answers) == split_response(crafted, [echo, echo])
+    assert answers[1] == (0x14, 0x14, b"\x00\x00\x00\x04\x00\x00\x00\x04")
