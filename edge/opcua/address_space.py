@@ -3,9 +3,9 @@
 A machine's birth (its metric specs and first values) adds its object, the 40501 components, the
 `Metrics` folder and one variable per metric (plus its 40501 mirror, edge.opcua.layout), in one batch
 through the node management service. A sample then replaces the Value attribute of the metric's node(s)
-and calls the attribute's data-change callbacks (the monitored items of subscribed clients), which is
-what asyncua's own write_attribute_value does, without its per-call type check: the value was built
-for the node's type (edge.opcua.values).
+and tells the attribute's monitored items (edge.opcua.subscriptions), which is what asyncua's own
+write_attribute_value does, without its per-call type check: the value was built for the node's type
+(edge.opcua.values).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from asyncua import ua
 from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
-from edge.opcua.values import SharedDataValue, data_value, offline_value, status_code, variant_type
+from edge.opcua.subscriptions import notify_all
+from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
 from edge.samples import MetricSpec, MetricType, Sample
 
 log = logging.getLogger(__name__)
@@ -177,7 +178,7 @@ class GatewaySpace:
         if machine is None:
             return
         slots = machine.slots
-        now = datetime.now(UTC)
+        now = server_now()
         count = 0
         for sample in samples:
             slot = slots.get(sample.name)
@@ -186,10 +187,8 @@ class GatewaySpace:
             value = data_value(sample, now)
             for attribute in slot.attributes:
                 attribute.value = value
-                callbacks = attribute.datachange_callbacks
-                if callbacks:
-                    for handle, callback in list(callbacks.items()):
-                        await callback(handle, value)
+                if attribute.datachange_callbacks:
+                    await _tell(attribute.datachange_callbacks, value)
             count += 1
         self.values_set += count
 
@@ -199,12 +198,12 @@ class GatewaySpace:
         if machine is None:
             return
         machine.online = False
-        value = offline_value(datetime.now(UTC))
+        value = offline_value(server_now())
         for slot in machine.slots.values():
             for attribute in slot.attributes:
                 attribute.value = value
-                for handle, callback in list(attribute.datachange_callbacks.items()):
-                    await callback(handle, value)
+                if attribute.datachange_callbacks:
+                    await _tell(attribute.datachange_callbacks, value)
 
     def metric_of(self, node_id: ua.NodeId) -> tuple[str, str] | None:
         """(machine, metric) shown by a node, else None."""
@@ -234,3 +233,10 @@ class GatewaySpace:
             node = self.iserver.aspace[node_id]
             node.attributes[ua.AttributeIds.AccessLevel].value = level
             node.attributes[ua.AttributeIds.UserAccessLevel].value = level
+
+
+async def _tell(callbacks: dict[int, Any], value: SharedDataValue) -> None:
+    """The monitored items of an attribute learn its new value: the gateway's subscriptions synchronously
+    (edge.opcua.subscriptions), any other through asyncua's coroutine."""
+    for handle, callback in notify_all(callbacks, value):
+        await callback(handle, value)

@@ -7,11 +7,15 @@ ignore it, so the server sets it null).
 
 from __future__ import annotations
 
+import functools
+import struct
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
+from typing import NamedTuple
 
 from asyncua import ua
 
+from edge.opcua.encoding import ENCODERS, ticks
 from edge.opcua.layout import OFFLINE_STATUS, VARIANT_TYPES, status_name
 from edge.samples import MetricType, Sample
 
@@ -24,15 +28,19 @@ _INTEGERS = frozenset({MetricType.INT8, MetricType.INT16, MetricType.INT32, Metr
 _FLOATS = frozenset({MetricType.FLOAT, MetricType.DOUBLE})
 
 
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
 class SharedDataValue(ua.DataValue):
-    """A DataValue the gateway never changes after building it, so it is shared rather than copied.
+    """A DataValue the gateway never changes after building it, so it is shared rather than copied, and
+    encoded once (`encoded`: its OPC UA binary form, edge.opcua.encoding) for every client it reaches.
 
     asyncua deep-copies the DataValue for every monitored item a change reaches (MonitoredItemValues keeps
     a private copy in case the caller mutates it): with a client subscribed to every value that copy was
     most of the server's CPU. Nothing in the server or here mutates a stored DataValue.
     """
 
-    __slots__ = ()
+    __slots__ = ("encoded",)
 
     def __deepcopy__(self, memo: object) -> SharedDataValue:
         return self
@@ -72,28 +80,79 @@ def status_code(name: str) -> ua.StatusCode:
     return code
 
 
+@functools.lru_cache(maxsize=4096)
 def utc(epoch_ms: int) -> datetime:
-    return datetime.fromtimestamp(epoch_ms / 1000, UTC)
+    """The aware datetime of an epoch-ms time, exact (no float), cached: the samples of one poll share
+    their timestamp, so a batch converts it once."""
+    return _EPOCH + timedelta(milliseconds=epoch_ms)
 
 
-def data_value(sample: Sample, server_time: datetime) -> ua.DataValue:
+class ServerTime(NamedTuple):
+    """The gateway's clock for one batch of values: ServerTimestamp as asyncua holds it and as it encodes it."""
+
+    when: datetime
+    ticks: int
+
+
+def server_now() -> ServerTime:
+    now = datetime.now(UTC)
+    return ServerTime(now, ua.datetime_to_win_epoch(now))
+
+
+def _shared_builder() -> Callable[[ua.Variant, ua.StatusCode, datetime, datetime, bytes], SharedDataValue]:
+    """`shared(variant, status, source, server, encoded)`: the SharedDataValue its dataclass __init__ builds
+    (and __post_init__ checks), with its slots set directly: the variant is already one."""
+    new = object.__new__
+    setters = {name: getattr(SharedDataValue, name).__set__ for name in (
+        "Encoding", "Value", "StatusCode", "SourceTimestamp", "ServerTimestamp", "SourcePicoseconds",
+        "ServerPicoseconds", "encoded")}
+    set_encoding, set_value, set_status, set_source, set_server, set_source_ps, set_server_ps, set_encoded = (
+        setters.values())
+
+    def shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server: datetime,
+               encoded: bytes) -> SharedDataValue:
+        made = new(SharedDataValue)
+        set_encoding(made, 0)
+        set_value(made, variant)
+        set_status(made, status)
+        set_source(made, source)
+        set_server(made, server)
+        set_source_ps(made, None)
+        set_server_ps(made, None)
+        set_encoded(made, encoded)
+        return made
+
+    return shared
+
+
+_shared = _shared_builder()
+_NULL_ENCODER = ENCODERS[ua.VariantType.Null]
+
+
+def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
     """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status)."""
     status = status_code(status_name(sample.quality))
-    variant = _NULL
+    stamp = sample.timestamp_ms
     if not status.is_bad() and sample.value is not None:
         value = _convert(sample.value, sample.type)
         if value is not None:
-            variant = _fast_variant(value, _VARIANT[sample.type])
-        else:
-            status = status_code("BadTypeMismatch")
-    return SharedDataValue(variant, StatusCode=status, SourceTimestamp=utc(sample.timestamp_ms),
-                        ServerTimestamp=server_time)
+            vtype = _VARIANT[sample.type]
+            try:
+                encoded = ENCODERS[vtype](value, status.value, ticks(stamp), server.ticks)
+            except (struct.error, OverflowError):  # outside the node's type (an Int16 of 40000)
+                encoded = None
+            if encoded is not None:
+                return _shared(_fast_variant(value, vtype), status, utc(stamp), server.when, encoded)
+        status = status_code("BadTypeMismatch")
+    encoded = _NULL_ENCODER(None, status.value, ticks(stamp), server.ticks)
+    return _shared(_NULL, status, utc(stamp), server.when, encoded)
 
 
-def offline_value(server_time: datetime) -> ua.DataValue:
+def offline_value(server: ServerTime) -> SharedDataValue:
     """What every value of a machine shows while its CNC session is down."""
-    return SharedDataValue(_NULL, StatusCode=status_code(OFFLINE_STATUS), SourceTimestamp=server_time,
-                        ServerTimestamp=server_time)
+    status = status_code(OFFLINE_STATUS)
+    encoded = _NULL_ENCODER(None, status.value, server.ticks, server.ticks)
+    return _shared(_NULL, status, server.when, server.when, encoded)
 
 
 def _convert(value: object, kind: MetricType) -> object:
