@@ -99,33 +99,13 @@ def server_now() -> ServerTime:
     return ServerTime(now, ua.datetime_to_win_epoch(now))
 
 
-def _shared_builder() -> Callable[[ua.Variant, ua.StatusCode, datetime, datetime, bytes], SharedDataValue]:
-    """`shared(variant, status, source, server, encoded)`: the SharedDataValue its dataclass __init__ builds
-    (and __post_init__ checks), with its slots set directly: the variant is already one."""
-    new = object.__new__
-    setters = {name: getattr(SharedDataValue, name).__set__ for name in (
-        "Encoding", "Value", "StatusCode", "SourceTimestamp", "ServerTimestamp", "SourcePicoseconds",
-        "ServerPicoseconds", "encoded")}
-    set_encoding, set_value, set_status, set_source, set_server, set_source_ps, set_server_ps, set_encoded = (
-        setters.values())
-
-    def shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server: datetime,
-               encoded: bytes) -> SharedDataValue:
-        made = new(SharedDataValue)
-        set_encoding(made, 0)
-        set_value(made, variant)
-        set_status(made, status)
-        set_source(made, source)
-        set_server(made, server)
-        set_source_ps(made, None)
-        set_server_ps(made, None)
-        set_encoded(made, encoded)
-        return made
-
-    return shared
+def _shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server: datetime,
+            encoded: bytes) -> SharedDataValue:
+    made = SharedDataValue(variant, StatusCode=status, SourceTimestamp=source, ServerTimestamp=server)
+    made.encoded = encoded
+    return made
 
 
-_shared = _shared_builder()
 _NULL_ENCODER = ENCODERS[ua.VariantType.Null]
 
 
