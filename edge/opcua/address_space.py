@@ -20,6 +20,7 @@ from asyncua import ua
 from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
+from edge.opcua.shared_attributes import SharedAttributes
 from edge.opcua.subscriptions import notify_all
 from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
 from edge.samples import MetricSpec, MetricType, Sample
@@ -61,6 +62,7 @@ class GatewaySpace:
         # which decides (and audits) also for the read-only ones
         self.by_node: dict[ua.NodeId, tuple[str, str]] = {}
         self.values_set = 0
+        self.attributes = SharedAttributes()
 
     def setup(self) -> None:
         objects = ua.NodeId(ua.ObjectIds.ObjectsFolder)
@@ -220,9 +222,13 @@ class GatewaySpace:
     def _add(self, items: list[ua.AddNodesItem]) -> None:
         if not items:
             return
+        added = []
         for item, result in zip(items, self.iserver.node_mgt_service.add_nodes(items), strict=True):
-            if not result.StatusCode.is_good():
+            if result.StatusCode.is_good():
+                added.append(self.iserver.aspace[result.AddedNodeId])
+            else:
                 log.warning("OPC UA node not added node=%s status=%s", item.RequestedNewNodeId, result.StatusCode)
+        self.attributes.share(added)
 
     def _value_attribute(self, node_id: ua.NodeId) -> Any:
         return self.iserver.aspace[node_id].attributes[ua.AttributeIds.Value]

@@ -149,3 +149,21 @@ async def test_a_deleted_item_and_unmonitored_nodes_queue_nothing(subscribed: Su
     await _feed(subscribed, _values("Macro/1", 1) + _values("Macro/2", 1))
     assert subscribed.subscription._triggered_datachanges == {}
     assert await subscribed.publish() == []
+
+
+async def test_machines_share_equal_static_attributes_and_change_them_apart(subscribed: Subscribed) -> None:
+    space, first = subscribed.space, subscribed.machine
+    second = f"m{next(_MACHINES)}"
+    space.machine_online(second, SPECS, [], lambda _spec: False)
+    aspace = space.iserver.aspace
+
+    def attribute(machine: str, attribute_id: ua.AttributeIds) -> Any:
+        return aspace[ua.NodeId(f"{machine}/Metrics/Macro/1", space.ns)].attributes[attribute_id]
+
+    for attribute_id in (ua.AttributeIds.DataType, ua.AttributeIds.AccessLevel, ua.AttributeIds.DisplayName):
+        assert attribute(first, attribute_id).value is attribute(second, attribute_id).value
+    assert attribute(first, ua.AttributeIds.NodeId).value.Value.Value.Identifier == f"{first}/Metrics/Macro/1"
+    assert attribute(second, ua.AttributeIds.NodeId).value.Value.Value.Identifier == f"{second}/Metrics/Macro/1"
+    space.machine_online(second, SPECS, [], lambda spec: spec.name == "Macro/1")  # now writable there only
+    assert attribute(second, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
+    assert not attribute(first, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
