@@ -189,8 +189,9 @@ class GatewaySpace:
             value = data_value(sample, now)
             for attribute in slot.attributes:
                 attribute.value = value
-                if attribute.datachange_callbacks:
-                    await _tell(attribute.datachange_callbacks, value)
+                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
+                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
+                        await callback(handle, value)  # any other monitored item, through asyncua
             count += 1
         self.values_set += count
 
@@ -204,8 +205,9 @@ class GatewaySpace:
         for slot in machine.slots.values():
             for attribute in slot.attributes:
                 attribute.value = value
-                if attribute.datachange_callbacks:
-                    await _tell(attribute.datachange_callbacks, value)
+                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
+                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
+                        await callback(handle, value)  # any other monitored item, through asyncua
 
     def metric_of(self, node_id: ua.NodeId) -> tuple[str, str] | None:
         """(machine, metric) shown by a node, else None."""
@@ -240,9 +242,3 @@ class GatewaySpace:
             node.attributes[ua.AttributeIds.AccessLevel].value = level
             node.attributes[ua.AttributeIds.UserAccessLevel].value = level
 
-
-async def _tell(callbacks: dict[int, Any], value: SharedDataValue) -> None:
-    """The monitored items of an attribute learn its new value: the gateway's subscriptions synchronously
-    (edge.opcua.subscriptions), any other through asyncua's coroutine."""
-    for handle, callback in notify_all(callbacks, value):
-        await callback(handle, value)

@@ -120,12 +120,18 @@ def install(service: SubscriptionService) -> None:
     service.__class__ = GatewaySubscriptions
 
 
-def notify_all(callbacks: dict[int, Callable[..., Any]], value: SharedDataValue) -> list[tuple[int, Any]]:
+_NONE: tuple[tuple[int, Any], ...] = ()
+
+
+def notify_all(callbacks: dict[int, Callable[..., Any]],
+               value: SharedDataValue) -> list[tuple[int, Any]] | tuple[tuple[int, Any], ...]:
     """Tell the monitored items behind `callbacks` (an attribute's data-change callbacks) of `value`;
-    returns those that need asyncua's coroutine (to be awaited with (handle, value))."""
-    slow: list[tuple[int, Any]] = []
+    returns those that need asyncua's coroutine (to be awaited with (handle, value)), usually none."""
+    slow: list[tuple[int, Any]] | None = None
     for handle, callback in callbacks.items():
         owner = getattr(callback, "__self__", None)
         if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+            if slow is None:
+                slow = []
             slow.append((handle, callback))
-    return slow
+    return _NONE if slow is None else slow
