@@ -17,7 +17,7 @@ from asyncua import ua
 
 from edge.opcua.encoding import ENCODERS, ticks
 from edge.opcua.layout import OFFLINE_STATUS, VARIANT_TYPES, status_name
-from edge.samples import MetricType, Sample
+from edge.samples import MetricType, Quality, Sample
 
 _VARIANT: dict[MetricType, ua.VariantType] = {kind: getattr(ua.VariantType, name)
                                               for kind, name in VARIANT_TYPES.items()}
@@ -109,14 +109,23 @@ def _shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server
 _NULL_ENCODER = ENCODERS[ua.VariantType.Null]
 
 
+def _status_of(quality: object) -> tuple[ua.StatusCode, bool]:
+    status = status_code(status_name(quality))
+    return status, status.is_bad()
+
+
+_QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quality -> (status, is bad)
+
+
 def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
     """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status)."""
-    status = status_code(status_name(sample.quality))
+    status, bad = _QUALITY_STATUS.get(sample.quality) or _status_of(sample.quality)
     stamp = sample.timestamp_ms
-    if not status.is_bad() and sample.value is not None:
-        value = _convert(sample.value, sample.type)
+    if not bad and sample.value is not None:
+        kind = sample.type
+        value = _CONVERT[kind](sample.value)
         if value is not None:
-            vtype = _VARIANT[sample.type]
+            vtype = _VARIANT[kind]
             try:
                 encoded = ENCODERS[vtype](value, status.value, ticks(stamp), server.ticks)
             except (struct.error, OverflowError):  # outside the node's type (an Int16 of 40000)
@@ -135,19 +144,30 @@ def offline_value(server: ServerTime) -> SharedDataValue:
     return _shared(_NULL, status, server.when, server.when, encoded)
 
 
-def _convert(value: object, kind: MetricType) -> object:
-    """The Python value asyncua encodes as `kind`, or None when the sample's value does not fit it."""
-    if kind in _FLOATS:
-        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
-    if kind in _INTEGERS:
-        return int(value) if isinstance(value, int) else None
-    if kind is MetricType.BOOLEAN:
-        return value if isinstance(value, bool) else None
-    if kind is MetricType.STRING:
-        return value if isinstance(value, str) else str(value)
-    if kind is MetricType.DATETIME:
-        return utc(value) if isinstance(value, int) and not isinstance(value, bool) else None
-    return None
+def _to_float(value: object) -> object:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+
+def _to_int(value: object) -> object:
+    return int(value) if isinstance(value, int) else None
+
+
+def _to_bool(value: object) -> object:
+    return value if isinstance(value, bool) else None
+
+
+def _to_str(value: object) -> object:
+    return value if isinstance(value, str) else str(value)
+
+
+def _to_datetime(value: object) -> object:
+    return utc(value) if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+# metric type -> the Python value asyncua encodes as that type, or None when the sample's value does not fit it
+_CONVERT: dict[MetricType, Callable[[object], object]] = {
+    **dict.fromkeys(_FLOATS, _to_float), **dict.fromkeys(_INTEGERS, _to_int), MetricType.BOOLEAN: _to_bool,
+    MetricType.STRING: _to_str, MetricType.DATETIME: _to_datetime}
 
 
 def client_value(variant: ua.Variant, kind: MetricType) -> tuple[bool, object]:
