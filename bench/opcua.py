@@ -97,8 +97,10 @@ class ClientProcess:
         self._log.close()
 
 
-def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float) -> dict[str, Any]:
-    """One measurement; every process it starts is stopped before it returns."""
+def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
+             profile_to: Path | None = None) -> dict[str, Any]:
+    """One measurement; every process it starts is stopped before it returns. `profile_to`: the daemon runs
+    under pyinstrument and its report is written there (its CPU figures then include the profiler's)."""
     binary = mosquitto_binary()
     if binary is None:
         raise RuntimeError("mosquitto is not installed (make bench runs scripts/ensure-mosquitto.sh)")
@@ -120,7 +122,7 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float) -> di
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, 0.1)
                           + opcua_section(mode, opcua_port, password))
-        daemon = DaemonProcess(config, workdir / "daemon.log")
+        daemon = DaemonProcess(config, workdir / "daemon.log", profile_to=profile_to)
         sub, proc = subscriber, daemon.proc
         wait_until(lambda: len(sub.births) >= machines or proc.poll() is not None, 30 + machines * 0.2,
                    f"DBIRTH of {machines} machines")

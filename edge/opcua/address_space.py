@@ -3,9 +3,9 @@
 A machine's birth (its metric specs and first values) adds its object, the 40501 components, the
 `Metrics` folder and one variable per metric (plus its 40501 mirror, edge.opcua.layout), in one batch
 through the node management service. A sample then replaces the Value attribute of the metric's node(s)
-and calls the attribute's data-change callbacks (the monitored items of subscribed clients), which is
-what asyncua's own write_attribute_value does, without its per-call type check: the value was built
-for the node's type (edge.opcua.values).
+and tells the attribute's monitored items (edge.opcua.subscriptions), which is what asyncua's own
+write_attribute_value does, without its per-call type check: the value was built for the node's type
+(edge.opcua.values).
 """
 
 from __future__ import annotations
@@ -20,7 +20,9 @@ from asyncua import ua
 from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
-from edge.opcua.values import SharedDataValue, data_value, offline_value, status_code, variant_type
+from edge.opcua.shared_attributes import SharedAttributes
+from edge.opcua.subscriptions import notify_all
+from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
 from edge.samples import MetricSpec, MetricType, Sample
 
 log = logging.getLogger(__name__)
@@ -60,6 +62,7 @@ class GatewaySpace:
         # which decides (and audits) also for the read-only ones
         self.by_node: dict[ua.NodeId, tuple[str, str]] = {}
         self.values_set = 0
+        self.attributes = SharedAttributes()
 
     def setup(self) -> None:
         objects = ua.NodeId(ua.ObjectIds.ObjectsFolder)
@@ -177,7 +180,7 @@ class GatewaySpace:
         if machine is None:
             return
         slots = machine.slots
-        now = datetime.now(UTC)
+        now = server_now()
         count = 0
         for sample in samples:
             slot = slots.get(sample.name)
@@ -186,10 +189,9 @@ class GatewaySpace:
             value = data_value(sample, now)
             for attribute in slot.attributes:
                 attribute.value = value
-                callbacks = attribute.datachange_callbacks
-                if callbacks:
-                    for handle, callback in list(callbacks.items()):
-                        await callback(handle, value)
+                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
+                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
+                        await callback(handle, value)  # any other monitored item, through asyncua
             count += 1
         self.values_set += count
 
@@ -199,12 +201,13 @@ class GatewaySpace:
         if machine is None:
             return
         machine.online = False
-        value = offline_value(datetime.now(UTC))
+        value = offline_value(server_now())
         for slot in machine.slots.values():
             for attribute in slot.attributes:
                 attribute.value = value
-                for handle, callback in list(attribute.datachange_callbacks.items()):
-                    await callback(handle, value)
+                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
+                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
+                        await callback(handle, value)  # any other monitored item, through asyncua
 
     def metric_of(self, node_id: ua.NodeId) -> tuple[str, str] | None:
         """(machine, metric) shown by a node, else None."""
@@ -221,9 +224,13 @@ class GatewaySpace:
     def _add(self, items: list[ua.AddNodesItem]) -> None:
         if not items:
             return
+        added = []
         for item, result in zip(items, self.iserver.node_mgt_service.add_nodes(items), strict=True):
-            if not result.StatusCode.is_good():
+            if result.StatusCode.is_good():
+                added.append(self.iserver.aspace[result.AddedNodeId])
+            else:
                 log.warning("OPC UA node not added node=%s status=%s", item.RequestedNewNodeId, result.StatusCode)
+        self.attributes.share(added)
 
     def _value_attribute(self, node_id: ua.NodeId) -> Any:
         return self.iserver.aspace[node_id].attributes[ua.AttributeIds.Value]
@@ -234,3 +241,4 @@ class GatewaySpace:
             node = self.iserver.aspace[node_id]
             node.attributes[ua.AttributeIds.AccessLevel].value = level
             node.attributes[ua.AttributeIds.UserAccessLevel].value = level
+

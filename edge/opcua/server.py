@@ -18,7 +18,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
 
-from edge.opcua import alarms, layout
+from edge.opcua import alarms, layout, subscriptions
 from edge.opcua.address_space import GatewaySpace
 from edge.opcua.security import PasswordUsers, ensure_certificate
 from edge.opcua.settings import SECURITY_MODES, OpcUaSettings
@@ -80,6 +80,7 @@ class GatewayServer:
         namespace = await server.register_namespace(settings.namespace_uri)
         history_type = await server.create_custom_event_type(
             namespace, alarms.HISTORY_EVENT_TYPE, ua.ObjectIds.BaseEventType, list(alarms.HISTORY_FIELDS))
+        subscriptions.install(iserver.subscription_service)
         space = GatewaySpace(iserver, namespace)
         space.setup()
         iserver.attribute_service = _GatewayAttributes(iserver.aspace, space, self._write)

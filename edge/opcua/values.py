@@ -7,13 +7,17 @@ ignore it, so the server sets it null).
 
 from __future__ import annotations
 
+import functools
+import struct
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
+from typing import NamedTuple
 
 from asyncua import ua
 
+from edge.opcua.encoding import ENCODERS, ticks
 from edge.opcua.layout import OFFLINE_STATUS, VARIANT_TYPES, status_name
-from edge.samples import MetricType, Sample
+from edge.samples import MetricType, Quality, Sample
 
 _VARIANT: dict[MetricType, ua.VariantType] = {kind: getattr(ua.VariantType, name)
                                               for kind, name in VARIANT_TYPES.items()}
@@ -24,15 +28,19 @@ _INTEGERS = frozenset({MetricType.INT8, MetricType.INT16, MetricType.INT32, Metr
 _FLOATS = frozenset({MetricType.FLOAT, MetricType.DOUBLE})
 
 
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
 class SharedDataValue(ua.DataValue):
-    """A DataValue the gateway never changes after building it, so it is shared rather than copied.
+    """A DataValue the gateway never changes after building it, so it is shared rather than copied, and
+    encoded once (`encoded`: its OPC UA binary form, edge.opcua.encoding) for every client it reaches.
 
     asyncua deep-copies the DataValue for every monitored item a change reaches (MonitoredItemValues keeps
     a private copy in case the caller mutates it): with a client subscribed to every value that copy was
     most of the server's CPU. Nothing in the server or here mutates a stored DataValue.
     """
 
-    __slots__ = ()
+    __slots__ = ("encoded",)
 
     def __deepcopy__(self, memo: object) -> SharedDataValue:
         return self
@@ -72,43 +80,94 @@ def status_code(name: str) -> ua.StatusCode:
     return code
 
 
+@functools.lru_cache(maxsize=4096)
 def utc(epoch_ms: int) -> datetime:
-    return datetime.fromtimestamp(epoch_ms / 1000, UTC)
+    """The aware datetime of an epoch-ms time, exact (no float), cached: the samples of one poll share
+    their timestamp, so a batch converts it once."""
+    return _EPOCH + timedelta(milliseconds=epoch_ms)
 
 
-def data_value(sample: Sample, server_time: datetime) -> ua.DataValue:
+class ServerTime(NamedTuple):
+    """The gateway's clock for one batch of values: ServerTimestamp as asyncua holds it and as it encodes it."""
+
+    when: datetime
+    ticks: int
+
+
+def server_now() -> ServerTime:
+    now = datetime.now(UTC)
+    return ServerTime(now, ua.datetime_to_win_epoch(now))
+
+
+def _shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server: datetime,
+            encoded: bytes) -> SharedDataValue:
+    made = SharedDataValue(variant, StatusCode=status, SourceTimestamp=source, ServerTimestamp=server)
+    made.encoded = encoded
+    return made
+
+
+_NULL_ENCODER = ENCODERS[ua.VariantType.Null]
+
+
+def _status_of(quality: object) -> tuple[ua.StatusCode, bool]:
+    status = status_code(status_name(quality))
+    return status, status.is_bad()
+
+
+_QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quality -> (status, is bad)
+
+
+def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
     """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status)."""
-    status = status_code(status_name(sample.quality))
-    variant = _NULL
-    if not status.is_bad() and sample.value is not None:
-        value = _convert(sample.value, sample.type)
+    status, bad = _QUALITY_STATUS.get(sample.quality) or _status_of(sample.quality)
+    stamp = sample.timestamp_ms
+    if not bad and sample.value is not None:
+        kind = sample.type
+        value = _CONVERT[kind](sample.value)
         if value is not None:
-            variant = _fast_variant(value, _VARIANT[sample.type])
-        else:
-            status = status_code("BadTypeMismatch")
-    return SharedDataValue(variant, StatusCode=status, SourceTimestamp=utc(sample.timestamp_ms),
-                        ServerTimestamp=server_time)
+            vtype = _VARIANT[kind]
+            try:
+                encoded = ENCODERS[vtype](value, status.value, ticks(stamp), server.ticks)
+            except (struct.error, OverflowError):  # outside the node's type (an Int16 of 40000)
+                encoded = None
+            if encoded is not None:
+                return _shared(_fast_variant(value, vtype), status, utc(stamp), server.when, encoded)
+        status = status_code("BadTypeMismatch")
+    encoded = _NULL_ENCODER(None, status.value, ticks(stamp), server.ticks)
+    return _shared(_NULL, status, utc(stamp), server.when, encoded)
 
 
-def offline_value(server_time: datetime) -> ua.DataValue:
+def offline_value(server: ServerTime) -> SharedDataValue:
     """What every value of a machine shows while its CNC session is down."""
-    return SharedDataValue(_NULL, StatusCode=status_code(OFFLINE_STATUS), SourceTimestamp=server_time,
-                        ServerTimestamp=server_time)
+    status = status_code(OFFLINE_STATUS)
+    encoded = _NULL_ENCODER(None, status.value, server.ticks, server.ticks)
+    return _shared(_NULL, status, server.when, server.when, encoded)
 
 
-def _convert(value: object, kind: MetricType) -> object:
-    """The Python value asyncua encodes as `kind`, or None when the sample's value does not fit it."""
-    if kind in _FLOATS:
-        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
-    if kind in _INTEGERS:
-        return int(value) if isinstance(value, int) else None
-    if kind is MetricType.BOOLEAN:
-        return value if isinstance(value, bool) else None
-    if kind is MetricType.STRING:
-        return value if isinstance(value, str) else str(value)
-    if kind is MetricType.DATETIME:
-        return utc(value) if isinstance(value, int) and not isinstance(value, bool) else None
-    return None
+def _to_float(value: object) -> object:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+
+def _to_int(value: object) -> object:
+    return int(value) if isinstance(value, int) else None
+
+
+def _to_bool(value: object) -> object:
+    return value if isinstance(value, bool) else None
+
+
+def _to_str(value: object) -> object:
+    return value if isinstance(value, str) else str(value)
+
+
+def _to_datetime(value: object) -> object:
+    return utc(value) if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+# metric type -> the Python value asyncua encodes as that type, or None when the sample's value does not fit it
+_CONVERT: dict[MetricType, Callable[[object], object]] = {
+    **dict.fromkeys(_FLOATS, _to_float), **dict.fromkeys(_INTEGERS, _to_int), MetricType.BOOLEAN: _to_bool,
+    MetricType.STRING: _to_str, MetricType.DATETIME: _to_datetime}
 
 
 def client_value(variant: ua.Variant, kind: MetricType) -> tuple[bool, object]:

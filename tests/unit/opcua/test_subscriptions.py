@@ -1,0 +1,169 @@
+"""A client's subscription to the gateway's values, in process (asyncua's server objects, no network): what
+each publish carries, decoded from its bytes as a client would."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+import pytest_asyncio
+from asyncua import Server, ua
+from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary
+
+from edge.opcua import subscriptions
+from edge.opcua.address_space import GatewaySpace
+from edge.samples import MetricSpec, MetricType, Quality, Sample
+
+pytestmark = pytest.mark.asyncio(loop_scope="module")  # one asyncua server (5 s to build) for the module
+CNC_MS = 1_764_072_000_000
+_MACHINES = itertools.count()
+SPECS = [MetricSpec(f"Macro/{n}", MetricType.DOUBLE) for n in range(4)]
+
+
+class _Request:
+    def __init__(self) -> None:
+        self.results: list[ua.StatusCode] = []
+
+
+@dataclass
+class Subscribed:
+    space: GatewaySpace
+    machine: str
+    subscription: Any
+    published: list[Any] = field(default_factory=list)  # decoded DataChangeNotifications (client side)
+
+    async def publish(self) -> list[tuple[int, object, int]]:
+        """(client handle, value, status code) of every notification of one publish, in order."""
+        self.published.clear()
+        await self.subscription.publish_results()
+        return [(item.ClientHandle, item.Value.Value.Value, item.Value.StatusCode.value)
+                for notification in self.published for item in notification.MonitoredItems]
+
+    async def monitor(self, metric: str, handle: int, queue_size: int, filter_: Any = None) -> int:
+        item = ua.MonitoredItemCreateRequest()
+        item.ItemToMonitor = ua.ReadValueId(NodeId=ua.NodeId(f"{self.machine}/Metrics/{metric}", self.space.ns),
+                                            AttributeId=ua.AttributeIds.Value)
+        item.MonitoringMode = ua.MonitoringMode.Reporting
+        item.RequestedParameters = ua.MonitoringParameters(ClientHandle=handle, QueueSize=queue_size)
+        if filter_ is not None:
+            item.RequestedParameters.Filter = filter_
+        params = ua.CreateMonitoredItemsParameters(ItemsToCreate=[item])
+        [result] = await self.subscription.monitored_item_srv.create_monitored_items(params)
+        assert result.StatusCode.is_good()
+        return int(result.MonitoredItemId)
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def server() -> AsyncIterator[tuple[Server, GatewaySpace]]:
+    server = Server()
+    await server.init()
+    subscriptions.install(server.iserver.subscription_service)
+    space = GatewaySpace(server.iserver, await server.register_namespace("urn:test"))
+    space.setup()
+    yield server, space
+
+
+@pytest_asyncio.fixture(loop_scope="module")
+async def subscribed(server: tuple[Server, GatewaySpace]) -> AsyncIterator[Subscribed]:
+    iserver, space = server[0].iserver, server[1]
+    machine = f"m{next(_MACHINES)}"
+    space.machine_online(machine, SPECS, [], lambda _spec: False)
+    await space.update(machine, [Sample(spec.name, 0.0, spec.type, CNC_MS) for spec in SPECS])
+    published: list[Any] = []
+
+    async def forward(result: ua.PublishResult, _request: _Request) -> None:
+        response = ua.PublishResponse(Parameters=result)
+        decoded = struct_from_binary(ua.PublishResponse, ua.utils.Buffer(struct_to_binary(response)))
+        published.extend(decoded.Parameters.NotificationMessage.NotificationData)
+
+    params = ua.CreateSubscriptionParameters(RequestedPublishingInterval=3_600_000, RequestedLifetimeCount=10_000,
+                                             RequestedMaxKeepAliveCount=1_000, PublishingEnabled=True)
+    created = await iserver.subscription_service.create_subscription(params, forward, ua.NodeId(1, 0),
+                                                                    request_callback=lambda _id: _Request())
+    subscription = iserver.subscription_service.subscriptions[created.SubscriptionId]
+    assert isinstance(subscription, subscriptions.GatewaySubscription)
+    result = Subscribed(space, machine, subscription, published)
+    try:
+        yield result
+    finally:
+        await subscription.stop()
+
+
+def _values(metric: str, *values: float, ms: int = CNC_MS) -> list[list[Sample]]:
+    return [[Sample(metric, value, MetricType.DOUBLE, ms + index)] for index, value in enumerate(values)]
+
+
+async def _feed(subscribed: Subscribed, batches: list[list[Sample]]) -> None:
+    for batch in batches:
+        await subscribed.space.update(subscribed.machine, batch)
+
+
+async def test_each_item_keeps_its_queue_size_of_latest_values(subscribed: Subscribed) -> None:
+    await subscribed.monitor("Macro/0", 10, queue_size=1)
+    await subscribed.monitor("Macro/1", 11, queue_size=3)
+    assert await subscribed.publish() == [(10, 0.0, 0), (11, 0.0, 0)]  # the current values first
+    await _feed(subscribed, _values("Macro/0", 1, 2, 3) + _values("Macro/1", 1, 2, 3, 4, 5))
+    assert await subscribed.publish() == [(10, 3.0, 0), (11, 3.0, 0), (11, 4.0, 0), (11, 5.0, 0)]
+    assert await subscribed.publish() == []
+
+
+async def test_an_unchanged_value_is_not_sent_again_but_a_status_change_is(subscribed: Subscribed) -> None:
+    await subscribed.monitor("Macro/2", 7, queue_size=5)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/2", 0.0, ms=CNC_MS + 500))  # only the CNC time moved
+    assert await subscribed.publish() == []
+    stale = Sample("Macro/2", 0.0, MetricType.DOUBLE, CNC_MS + 600, Quality.STALE)
+    await subscribed.space.update(subscribed.machine, [stale])
+    await subscribed.space.offline(subscribed.machine)
+    assert await subscribed.publish() == [(7, 0.0, ua.StatusCodes.UncertainLastUsableValue),
+                                          (7, None, ua.StatusCodes.BadNoCommunication)]
+
+
+async def test_a_filtered_item_follows_asyncuas_path(subscribed: Subscribed) -> None:
+    flt = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
+    await subscribed.monitor("Macro/3", 3, queue_size=10, filter_=flt)
+    await subscribed.monitor("Macro/0", 4, queue_size=10)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/3", 0.0, ms=CNC_MS + 500) + _values("Macro/0", 0.0, 9.5))
+    assert await subscribed.publish() == [(3, 0.0, 0), (4, 9.5, 0)]  # the timestamp trigger sees the new time
+
+
+async def test_a_disabled_item_hears_nothing_until_enabled(subscribed: Subscribed) -> None:
+    item = await subscribed.monitor("Macro/1", 5, queue_size=1)
+    await subscribed.publish()
+    service = subscribed.subscription.monitored_item_srv
+    await service.set_monitoring_mode(ua.MonitoringMode.Disabled, [item])
+    await _feed(subscribed, _values("Macro/1", 1, 2))
+    assert await subscribed.publish() == []
+    await service.set_monitoring_mode(ua.MonitoringMode.Reporting, [item])
+    assert await subscribed.publish() == [(5, 2.0, 0)]
+
+
+async def test_a_deleted_item_and_unmonitored_nodes_queue_nothing(subscribed: Subscribed) -> None:
+    item = await subscribed.monitor("Macro/1", 5, queue_size=1)
+    await subscribed.publish()
+    subscribed.subscription.monitored_item_srv.delete_monitored_items([item])
+    await _feed(subscribed, _values("Macro/1", 1) + _values("Macro/2", 1))
+    assert subscribed.subscription._triggered_datachanges == {}
+    assert await subscribed.publish() == []
+
+
+async def test_machines_share_equal_static_attributes_and_change_them_apart(subscribed: Subscribed) -> None:
+    space, first = subscribed.space, subscribed.machine
+    second = f"m{next(_MACHINES)}"
+    space.machine_online(second, SPECS, [], lambda _spec: False)
+    aspace = space.iserver.aspace
+
+    def attribute(machine: str, attribute_id: ua.AttributeIds) -> Any:
+        return aspace[ua.NodeId(f"{machine}/Metrics/Macro/1", space.ns)].attributes[attribute_id]
+
+    for attribute_id in (ua.AttributeIds.DataType, ua.AttributeIds.AccessLevel, ua.AttributeIds.DisplayName):
+        assert attribute(first, attribute_id).value is attribute(second, attribute_id).value
+    assert attribute(first, ua.AttributeIds.NodeId).value.Value.Value.Identifier == f"{first}/Metrics/Macro/1"
+    assert attribute(second, ua.AttributeIds.NodeId).value.Value.Value.Identifier == f"{second}/Metrics/Macro/1"
+    space.machine_online(second, SPECS, [], lambda spec: spec.name == "Macro/1")  # now writable there only
+    assert attribute(second, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
+    assert not attribute(first, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
