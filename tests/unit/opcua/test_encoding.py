@@ -77,13 +77,16 @@ def test_status_follows_quality_and_bad_carries_no_value() -> None:
 
 
 @pytest.mark.parametrize("epoch_ms", [-11_644_473_600_001, -11_644_473_600_000, 0, CNC_MS, 253_402_300_798_999,
-                                      253_402_300_799_000, 253_402_300_800_000])
+                                      253_402_300_799_000])
 def test_ticks_are_asyncuas_datetime_conversion(epoch_ms: int) -> None:
-    try:
-        when = datetime(1970, 1, 1, tzinfo=UTC) + timedelta(milliseconds=epoch_ms)
-    except OverflowError:
-        pytest.skip("not a Python datetime")
+    when = datetime(1970, 1, 1, tzinfo=UTC) + timedelta(milliseconds=epoch_ms)
     assert encoding.ticks(epoch_ms) == ua.datetime_to_win_epoch(when)
+
+
+def test_ticks_beyond_pythons_datetime_are_opc_uas_maximum() -> None:
+    """Year 10000 has no Python datetime; OPC UA's rule is to send the maximum DateTime, as for 9999-12-31."""
+    last = ua.datetime_to_win_epoch(datetime(1970, 1, 1, tzinfo=UTC) + timedelta(milliseconds=253_402_300_799_000))
+    assert encoding.ticks(253_402_300_800_000) == encoding.ticks(10**15) == last
 
 
 def test_a_data_change_notification_is_asyncuas() -> None:
