@@ -19,9 +19,9 @@ import pytest
 from edge.config import parse_config
 from edge.publish.forwarding import ForwardingPolicy
 from edge.service.daemon import Daemon
-from edge.sim.fleet import Fleet, MachineSpec
+from edge.sim.fleet import Fleet
 from tests.helpers import Mosquitto, async_wait_for
-from tests.integration.delivery import keep_changing
+from tests.integration.delivery import changing_fleet
 from tests.integration.mqtt_observer import Observer, Received
 from tests.integration.tcp_relay import TcpRelay
 
@@ -34,20 +34,9 @@ RESUMED_WITHIN_S = 10.0  # under the old backoff's least delay (15 s): a probe (
 
 
 @pytest.fixture
-async def relay(mosquitto: Mosquitto) -> AsyncIterator[TcpRelay]:
-    r = TcpRelay(mosquitto.host, mosquitto.port)
-    await r.start()
-    yield r
-    await r.close()
-
-
-@pytest.fixture
 async def fleet() -> AsyncIterator[Fleet]:
-    async with Fleet([MachineSpec(profile="30i") for _ in range(MACHINES)], base_port=0) as f:
-        changer = asyncio.create_task(keep_changing(list(f)))
+    async with changing_fleet(MACHINES) as f:
         yield f
-        changer.cancel()
-
 
 def config_text(relay: TcpRelay, state_dir: Path, fleet: Fleet) -> str:
     machines = "".join(
