@@ -89,11 +89,18 @@ def encode_samples(samples: Sequence[Sample]) -> bytes:
     return json.dumps(rows, separators=(",", ":"), default=str).encode("utf-8")
 
 
+# The enum members by their stored values: a dict lookup per sample instead of an enum call (replay decodes
+# every spooled sample; an unknown value falls through to the enum, which says what is wrong).
+_TYPES: dict[object, MetricType] = {t.value: t for t in MetricType}
+_QUALITIES: dict[object, Quality] = {int(q): q for q in Quality}
+
+
 def decode_samples(body: bytes) -> list[Sample]:
     """The inverse of encode_samples; ValueError (with what came) for a body that is not one."""
     try:
         rows = json.loads(body)
-        return [Sample(str(name), value, MetricType(kind), int(ts), Quality(int(quality)))
+        return [Sample(str(name), value, _TYPES.get(kind) or MetricType(kind), int(ts),
+                       _QUALITIES.get(quality) or Quality(int(quality)))
                 for name, value, kind, ts, quality in rows]
     except (TypeError, ValueError, UnicodeDecodeError) as exc:
         raise ValueError(f"spool row: expected a JSON list of [name, value, type, ts, quality], "
