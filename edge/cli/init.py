@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import math
 import re
 import socket
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +26,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "init", help="probe CNCs and write a commented config that polls what each answered",
         description="Probe each CNC read-only (as `probe` does: one request per read function, nothing is "
                     "written) and write a commented YAML config: a machine per address, each polling what its "
-                    "control answered with data, status periods from the measured round trips, writes off. "
+                    "control answered with data, status periods from the status group timed as one batch, as the "
+                    "daemon sends it, writes off. "
                     "Check the result with `focas-edge check-config FILE`.",
         epilog="Exit codes: 0 every CNC probed and the config written, 1 a CNC could not be reached (the config "
                "is still written for the others, the missing ones as comments; nothing is written when none "
@@ -113,6 +116,44 @@ async def _probe_all(args: argparse.Namespace, ids: list[str]) -> list[Any]:
         return ProbedMachine(machine_id, parsed.host, parsed.port, args.transport, report)
 
     return list(await asyncio.gather(*(one(a, i) for a, i in zip(args.addresses, ids, strict=True))))
+
+
+STATUS_BATCH_TRIES = 3  # the fastest of these: the daemon sends the same request every tick, warm
+
+
+async def _time_status_batches(reached: list[Any], draft: str) -> list[Any]:
+    """Each machine's status group timed as the daemon will send it: the session and plan the daemon builds
+    from the config written (`draft`), the group and the clock in one batched request."""
+    from dataclasses import replace
+
+    from edge.collect import plan as pl
+    from edge.collect.poller import default_session
+    from edge.collect.tick_batch import TickBatch
+    from edge.config import parse_config
+    from edge.focas.errors import FocasError
+    from edge.service.settings import machine_settings
+
+    config = parse_config(draft, source="the config written", secrets=False)
+    by_id = {machine.id: machine for machine in config.machines}
+
+    async def one(probed: Any) -> Any:
+        settings = machine_settings(config, by_id[probed.id])
+        items = TickBatch.build(pl.MachinePlan.build(settings.poll).reads_for({pl.Group.STATUS})).items
+        session = default_session(settings)
+        fastest = math.inf
+        try:
+            await session.connect()
+            for _ in range(STATUS_BATCH_TRIES):
+                started = time.perf_counter()
+                await session.batch(items)
+                fastest = min(fastest, time.perf_counter() - started)
+        except FocasError:  # not timed: the writer falls back to the probe's round trips, summed
+            return probed
+        finally:
+            await session.close()
+        return replace(probed, status_batch_ms=round(fastest * 1000, 2))
+
+    return list(await asyncio.gather(*(one(probed) for probed in reached)))
 
 
 SNIFF_S = 1.5  # how long a port that answered may take to say what it is (SSH, FTP, telnet greet first)
@@ -244,6 +285,8 @@ def handle(args: argparse.Namespace) -> int:
     if not reached:
         print("focas-edge init: no CNC answered; nothing written", file=sys.stderr)
         return EXIT_FAILURE
+    reached = asyncio.run(_time_status_batches(reached, render_config(reached, [], broker_host, broker_port,
+                                                                       args.group, node)))
     text = render_config(reached, missed, broker_host, broker_port, args.group, node, not_focas)
     if acl is not None:
         _write_acl(acl, text, users[0], users[1])

@@ -52,6 +52,7 @@ from edge.focas import items as it
 from edge.focas.connect import open_session
 from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
 from edge.focas.model import ActiveAlarm, AlarmHistoryEntry, StatInfo
+from edge.focas.outage import ConnectOutage
 from edge.focas.session import CncSession
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 
@@ -112,6 +113,7 @@ class MachinePoller:
         self.online = False
         self.online_changed_at = time.time()  # wall time `online` last changed (the status page's "since")
         self.last_error = ""  # the last connect, session or read error, for the status page
+        self._outage = ConnectOutage(f"machine={machine.id}", log)  # a switched-off CNC: not a line per retry
         self.last_progress = time.monotonic()
         # Wall time of the last answered batch, by the set of groups it read (one dict store a tick; read_at
         # turns it into per group times when the status page asks).
@@ -242,8 +244,7 @@ class MachinePoller:
             delay = state.next_action.sleep if state.next_action else 0.0
             reason = connect_error(self.machine, error)
             self.last_error = f"connect failed: {reason}"
-            log.warning("connect failed machine=%s attempt=%d error=%s retry_in=%.2fs",
-                        self.machine_id, state.attempt_number, reason, delay)
+            self._outage.failed(reason, delay)
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(FocasError),
@@ -258,6 +259,7 @@ class MachinePoller:
         self.last_progress = time.monotonic()
         log.info("connected machine=%s endpoint=%s model=%s", self.machine_id, self.machine.endpoint,
                  self.session.sysinfo.model_name if self.session.sysinfo else "?")
+        self._outage.connected()
 
     async def _go_offline(self) -> None:
         self.session_up.clear()

@@ -3,8 +3,10 @@
 Each CNC is probed read-only (edge.focas.probe: one request per function, nothing written), and its poll plan
 keeps only what that control answered with data: the position kinds, the part count (parameter 6711),
 the probe's macro range, PMC F-area bytes and machine-position diagnosis. The status period is the
-shortest of 0.5/1/2/5 s at which the status group's measured round trips take at most a fifth of it,
-so a slow link or a busy control is not polled harder than it can answer. Writes are off. The file is
+shortest of 0.5/1/2/5 s at which the status group, timed as the daemon sends it (one batched request,
+edge.cli.init), takes at most a fifth of it, so a slow link or a busy control is not polled harder than
+it can answer. The probe's own round trips are one request per function: summed, they would charge a
+control on a 30 ms link nine round trips for what the daemon asks in one. Writes are off. The file is
 commented so that an integration engineer can see what was found and where to go on from there.
 """
 
@@ -19,7 +21,7 @@ from edge.focas.items import POSITION_KINDS
 from edge.focas.probe import PROBE_DIAG, PROBE_MACROS, PROBE_PARAM, PROBE_PMC, ProbeReport
 
 STATUS_PERIODS_S = (0.5, 1.0, 2.0, 5.0)
-STATUS_SHARE = 0.2  # the status group's round trips may take at most this share of its period
+STATUS_SHARE = 0.2  # the status group's batch may take at most this share of its period
 STATUS_FUNCTIONS = ("ReadStatus", "ReadAlarmStatus", "ReadProgramNumber", "ReadSequenceNumber", "ReadFeed",
                     "ReadSpindleSpeed", "ReadSpindleLoad")
 WANTED_POSITIONS = ("absolute", "machine")  # more kinds are one line away; these two are what most plants chart
@@ -34,6 +36,7 @@ class ProbedMachine:
     port: int
     transport: str
     report: ProbeReport
+    status_batch_ms: float | None = None  # the status group sent as one batch, as the daemon sends it
 
 
 def machine_id_for(address: str) -> str:
@@ -41,10 +44,14 @@ def machine_id_for(address: str) -> str:
     return "cnc-" + re.sub(r"[^A-Za-z0-9]+", "-", address.removeprefix("tcp:")).strip("-")
 
 
-def status_period_s(report: ProbeReport) -> float:
-    """The shortest candidate period the status group's measured round trips fit in (STATUS_SHARE of it)."""
-    spent_s = sum((step.rtt_ms or 0.0) for step in report.steps
-                  if step.function in STATUS_FUNCTIONS or step.function == "ReadPositions") / 1000
+def status_period_s(report: ProbeReport, batch_ms: float | None = None) -> float:
+    """The shortest candidate period the status group's batch fits in (STATUS_SHARE of it); without a timed
+    batch (it failed), the probe's round trips summed: an over-estimate, so never a period too short."""
+    if batch_ms is not None:
+        spent_s = batch_ms / 1000
+    else:
+        spent_s = sum((step.rtt_ms or 0.0) for step in report.steps
+                      if step.function in STATUS_FUNCTIONS or step.function == "ReadPositions") / 1000
     for period in STATUS_PERIODS_S:
         if spent_s <= period * STATUS_SHARE:
             return period
@@ -56,13 +63,15 @@ def _answered(report: ProbeReport, function: str, arguments: str | None = None) 
                if step.function == function and (arguments is None or step.arguments == arguments))
 
 
-def poll_lines(report: ProbeReport) -> list[str]:
+def poll_lines(report: ProbeReport, batch_ms: float | None = None) -> list[str]:
     """The machine's `poll:` block (indented for a list entry), from what the probe saw work."""
     positions = [kind for kind in POSITION_KINDS
                  if kind in WANTED_POSITIONS and _answered(report, "ReadPositions", kind)]
     part_count = _answered(report, "ReadParams", f"{PROBE_PARAM} axis 0")
+    measured = (f"one status batch took {batch_ms:.1f} ms" if batch_ms is not None
+                else "the status reads' round trips, summed (the batch could not be timed)")
     lines = ["    poll:",
-             f"      periods: {{status: {status_period_s(report):g}s}}   # measured: see the header",
+             f"      periods: {{status: {status_period_s(report, batch_ms):g}s}}   # measured: {measured}",
              f"      positions: [{', '.join(positions)}]"
              + ("" if len(positions) == len(WANTED_POSITIONS) else "   # only these answered"),
              f"      part_count: {'true' if part_count else 'false'}"
@@ -97,7 +106,7 @@ def render_config(machines: list[ProbedMachine], unreachable: list[tuple[str, st
         "# focas-edge config written by `focas-edge init` from what each CNC answered to a read-only probe.",
         "# Check it with `focas-edge check-config FILE`; reference: docs/config.md.",
         f"# Status periods: the shortest of {', '.join(f'{p:g}s' for p in STATUS_PERIODS_S)} at which the status "
-        f"reads' measured round trips take at most {STATUS_SHARE:.0%} of the period.",
+        f"group, sent as one batch as the daemon sends it, takes at most {STATUS_SHARE:.0%} of the period.",
         "",
         "mqtt:",
         f"  host: {_quoted(broker_host)}",
@@ -132,7 +141,7 @@ def render_config(machines: list[ProbedMachine], unreachable: list[tuple[str, st
             out.append(f"    series: {_quoted(machine.report.model)}")
         if machine.report.paths > 1:
             out.append(f"    paths: {machine.report.paths}    # each path beyond the first is a device of its own")
-        out.extend(poll_lines(machine.report))
+        out.extend(poll_lines(machine.report, machine.status_batch_ms))
     for address, reason in unreachable:
         where = parse_address(address)
         out.append(f"  # NOT REACHED {address}: {reason}")

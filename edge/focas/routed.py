@@ -21,6 +21,7 @@ from typing import Any, ClassVar
 from edge.focas import items as it
 from edge.focas.errors import EW_SOCKET, CncError, ConnectionLost, FocasError, NotSupported
 from edge.focas.model import Capabilities, SysInfo
+from edge.focas.outage import ConnectOutage
 from edge.focas.session import CncSession, ItemResult
 
 log = logging.getLogger(__name__)
@@ -39,6 +40,8 @@ class RoutedSession(CncSession):
         self.native = native
         self.library = library
         self._library_connect: asyncio.Task[None] | None = None
+        # Retried on every tick that needs it while down: a WARNING each time would flood the journal.
+        self._library_outage = ConnectOutage(f"library host peer={library.describe()}", log)
 
     def describe(self) -> str:
         return f"{self.native.describe()} + {self.library.describe()}"
@@ -80,8 +83,9 @@ class RoutedSession(CncSession):
         try:
             await self.library.connect()
         except FocasError as exc:
-            log.warning("library host unavailable peer=%s error=%s (only the functions routed to it fail)",
-                        self.library.describe(), exc)
+            self._library_outage.failed(f"{exc} (only the functions routed to it fail)")
+        else:
+            self._library_outage.connected()
 
     async def _close(self) -> None:
         if self._library_connect is not None:

@@ -42,6 +42,7 @@ from edge.focas.model import (
     StatInfo,
     SysInfo,
 )
+from edge.focas.outage import ConnectOutage
 
 log = logging.getLogger(__name__)
 
@@ -128,11 +129,11 @@ class CncSession(abc.ABC):
     async def connect_with_retry(self, deadline: float | None = None) -> SysInfo:
         """Connect, retrying with capped exponential backoff and jitter; each retry logged once."""
 
+        outage = ConnectOutage(f"peer={self.describe()}", log)
+
         def _log(state: RetryCallState) -> None:
             exc = state.outcome.exception() if state.outcome else None
-            sleep = state.next_action.sleep if state.next_action else 0.0
-            log.warning("connect failed peer=%s attempt=%d error=%s retry_in=%.2fs",
-                        self.describe(), state.attempt_number, exc, sleep)
+            outage.failed(exc, state.next_action.sleep if state.next_action else 0.0)
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(FocasError),
@@ -143,7 +144,9 @@ class CncSession(abc.ABC):
         )
         async for attempt in retrying:
             with attempt:
-                return await self.connect()
+                sysinfo = await self.connect()
+                outage.connected()
+                return sysinfo
         raise AssertionError("unreachable")  # pragma: no cover
 
     async def close(self) -> None:

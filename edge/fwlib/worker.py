@@ -34,6 +34,7 @@ from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wai
 
 from edge.focas.errors import EW_SOCKET, EW_UNEXP
 from edge.focas.model import ParamType
+from edge.focas.outage import ConnectOutage
 from edge.focas.packed.endpoint import error_answer
 from edge.fwlib.calls import LibraryCnc, answer
 from edge.fwlib.library import FocasLibrary
@@ -129,6 +130,7 @@ class HandleWorker:
         self._lock = asyncio.Lock()
         self._connector: asyncio.Task[None] | None = None
         self.connects = 0
+        self._outage = ConnectOutage(f"machine={target.name} address={target.host}:{target.port}", log)
         # (command, payload) of a request whose call overran -> (monotonic end of its rest, rest in s)
         self._resting: dict[tuple[int, bytes], tuple[float, float]] = {}
 
@@ -218,8 +220,8 @@ class HandleWorker:
     async def _connect(self) -> None:
         def before_sleep(state: RetryCallState) -> None:
             error = state.outcome.exception() if state.outcome else None
-            log.warning("FOCAS library could not open the CNC machine=%s address=%s:%d attempt=%d error=%s",
-                        self.target.name, self.target.host, self.target.port, state.attempt_number, error)
+            self._outage.failed(f"FOCAS library could not open the CNC: {error}",
+                                state.next_action.sleep if state.next_action else None)
 
         retrying = AsyncRetrying(
             retry=retry_if_exception_type(ConnectFailed),
@@ -230,6 +232,7 @@ class HandleWorker:
         async for attempt in retrying:
             with attempt:
                 await self._connect_once()
+        self._outage.connected()
 
     async def _connect_once(self) -> None:
         thread = CallThread(f"fwlib-{self.target.name}")

@@ -14,7 +14,8 @@ What lives here (one job per module):
   node, ddata, payload, aliases, bdseq, primary_host   Sparkplug, sans-IO: births, seq, metric encoding, STATE
   json_topics        JSON topic names and bodies, sans-IO
   mqtt, mqtt_wire, credentials, connect_failure        the paho connection driven by the asyncio loop
-  broker_trouble     a broker outage said once, summarised a minute, and its end; the state the status shows
+  broker_trouble     a broker outage said once, summarised a minute, and its end; the state the status shows;
+                     the one classifier of connect errors (connect_failure only adds the setting to check)
   forwarding, replay_dedupe, spool, spool_disk         store and forward bookkeeping, the SQLite spool
   state_store        small JSON documents in state_dir (bdSeq, aliases)
   settings           PublishSettings: what this layer needs from the config, as a plain dataclass

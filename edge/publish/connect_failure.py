@@ -1,4 +1,7 @@
-"""Why an MQTT connect attempt failed, said in the config's terms (for one WARNING line per attempt).
+"""What to change when an MQTT connect fails, said in the config's terms (the hint on the outage's WARNING).
+
+The reason itself (refused, TLS, not authorised, ...) is edge.publish.broker_trouble.classify, the one
+classifier of broker connect errors; this module only turns a cause into the setting to look at.
 
 A broker that requires a client certificate lets a TLS 1.3 client finish its handshake and then closes
 the session when it reads CONNECT: paho reports only "connection lost" and logs the TLS alert on its own
@@ -7,33 +10,7 @@ the session when it reads CONNECT: paho reports only "connection lost" and logs 
 
 from __future__ import annotations
 
-import errno
-import socket
-import ssl
-
 from edge.publish.settings import PublishSettings
-
-
-def is_tls_failure(error: BaseException) -> bool:
-    """A TLS handshake or certificate verification error (not a refused or unreachable TCP connect)."""
-    return isinstance(error, ssl.SSLError | ssl.CertificateError)
-
-
-# A TCP connect that met these found nobody at the broker's port: the broker never saw the attempt.
-_NOBODY_THERE = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN,
-                           errno.ETIMEDOUT})
-
-
-def nobody_answered(error: BaseException) -> bool:
-    """The attempt ended before any broker process saw it: the port refused, the host or network was
-    unreachable, or the TCP connect timed out. Such an attempt costs the broker nothing, so it may be repeated
-    often (edge.publish.mqtt probes at ~1 s); a name that does not resolve, a TLS failure or a refused
-    CONNECT are answers, and keep the growing backoff."""
-    if isinstance(error, socket.gaierror) or is_tls_failure(error):
-        return False
-    if isinstance(error, TimeoutError | ConnectionRefusedError):
-        return True
-    return isinstance(error, OSError) and error.errno in _NOBODY_THERE
 
 
 def hint(cause: str, settings: PublishSettings) -> str:

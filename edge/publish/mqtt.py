@@ -46,7 +46,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
-from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble
+from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble, is_tls_failure, nobody_answered
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -249,8 +249,8 @@ class MqttConnection:
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            self._nobody_answered = connect_failure.nobody_answered(exc)
-            tls = connect_failure.is_tls_failure(exc)
+            self._nobody_answered = nobody_answered(exc)
+            tls = is_tls_failure(exc)
             self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
         finally:

@@ -71,8 +71,10 @@ class Daemon:
         self.start_gate = StartGate(START_SLOTS)
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
-        self.trends = open_trends(self.state_dir, (m.id for m in config.devices()))  # what the plant page draws
-        self.outputs = Outputs(self.publisher, [self.trends] + ([self.opcua] if self.opcua is not None else []))
+        # What the plant page draws; the page is its only reader, and `http` takes effect at a restart only:
+        # with the page off, nothing records or saves it (a saved day stays on disk for the next run with it).
+        self.trends = open_trends(self.state_dir, (m.id for m in config.devices())) if config.http.enabled else None
+        self.outputs = Outputs(self.publisher, [o for o in (self.trends, self.opcua) if o is not None])
         self.publisher.on_device_command = self.commands.on_device_commands
         self.publisher.on_json_command = self.commands.on_json_command
         self.publisher.node_metrics_source = self.node_metrics
@@ -128,8 +130,9 @@ class Daemon:
             self._start_machine(machine, spread)
         self.notifier.ready(f"polling {len(self.pollers)} machine(s)")
         log.info("started version=%s machines=%d state_dir=%s", __version__, len(self.pollers), self.state_dir)
-        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics"),
-                      asyncio.create_task(keep_saved(self.trends, self.state_dir), name="plant-timelines")]
+        background = [asyncio.create_task(self._node_metrics_loop(), name="node-metrics")]
+        if self.trends is not None:
+            background.append(asyncio.create_task(keep_saved(self.trends, self.state_dir), name="plant-timelines"))
         if self.notifier.enabled:
             background.append(asyncio.create_task(self._systemd_status_loop(), name="systemd-status"))
         interval = self.notifier.watchdog_interval()
@@ -171,7 +174,8 @@ class Daemon:
         if self.status_http is not None:
             await self.status_http.stop()
             self.status_http = None
-        close_trends(self.trends, self.state_dir)
+        if self.trends is not None:
+            close_trends(self.trends, self.state_dir)
         self.lock.release()  # last: nothing of this daemon touches state_dir any more
         log.info("stopped")
 
@@ -281,7 +285,8 @@ class Daemon:
         for machine_id in removed + changed:
             await self._stop_machine(machine_id)
         for machine_id in removed:
-            self.trends.forget(machine_id)
+            if self.trends is not None:
+                self.trends.forget(machine_id)
         for machine_id in changed + added:
             self._start_machine(fresh[machine_id])
         log.info("reloaded added=%s removed=%s changed=%s", added, removed, changed)

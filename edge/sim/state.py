@@ -6,7 +6,10 @@ cycle events (part finished, alarm raised, alarm cleared) between the last call 
 injects a fake clock gets exactly the same machine every run.
 
 The cycle: a part program runs (MEM + STaRT + MoTioN, axes move, feed and spindle turn), then the machine
-sits between parts (reset after M30) and the cycle repeats. Each finished part increments parameters
+sits between parts (reset after M30) and the cycle repeats. FEED HOLD stops the cycle where it is until it
+is released (the operator's cycle start): the status word says HOLD, the axes stand, feed and the cutting
+loads are 0, no part is finished; the spindle turns on, as on a real control. The cycle time then resumes
+from where it stood, so the held time is simply missing from it. Each finished part increments parameters
 6711 (parts count) and 6712 (total parts). Machines with ``CycleSpec.alarm_every`` > 0 raise an alarm
 between parts every that many cycles and clear it a few seconds later; every alarm enters the history
 ring (250 entries, newest first) stamped with the CNC's local wall-clock time.
@@ -114,6 +117,8 @@ class MachineState:
         self.clock_macro: int | None = None
         self.emergency = False
         self.feed_hold = False  # the operator's FEED HOLD button (admin `feed_hold`): run HOLD until released
+        self._held_at: float | None = None  # real time feed hold was pressed; the cycle time stands from there
+        self._held_s = 0.0  # real seconds of the holds already released (missing from the cycle time)
         self.mode = AUT_MEM
         self._alarms.seed_history(self._t0, self.seed)
         self._processed = self._phase
@@ -158,7 +163,10 @@ class MachineState:
     def advance(self, now: float | None = None) -> None:
         """Replay the cycle up to `now` (default: the injected clock): parts, alarms raised and cleared."""
         with self._lock:
-            target = (self._time() if now is None else now) - self._t0 + self._phase
+            real = self._time() if now is None else now
+            if self._held_at is not None:  # held: the cycle stands where feed hold stopped it
+                real = min(real, self._held_at)
+            target = real - self._t0 - self._held_s + self._phase
             processed = self._processed
             if target <= processed:
                 return
@@ -167,7 +175,7 @@ class MachineState:
             if done > 0:
                 self._params.count_parts(done)
             if cycle.alarm_every > 0:
-                self._alarms.replay(cycle, processed, target, self._t0, self._phase)
+                self._alarms.replay(cycle, processed, target, self._t0 + self._held_s, self._phase)
             self._processed = target
             self._refresh_signals(target)
 
@@ -180,8 +188,10 @@ class MachineState:
         """F/Y signals that mirror the machine state (a ladder would set them)."""
         cutting, _ = self._cycle.phase_at(t)
         running = cutting and not self.emergency
+        held = running and self.feed_hold
         f, y = self._pmc.areas["F"], self._pmc.areas["Y"]
-        f[0] = (0b1000_0000 if self.mode == AUT_MEM else 0) | (0b0010_0000 if running else 0)
+        f[0] = ((0b1000_0000 if self.mode == AUT_MEM else 0) | (0b0001_0000 if held else 0)  # OP, SPL
+                | (0b0010_0000 if running and not held else 0))  # STL
         f[1] = 0b0000_0001 if self._alarms.any_active() else 0  # AL
         y[0] = (y[0] & 0xFE) | (1 if running else 0)  # coolant on
 
@@ -237,7 +247,7 @@ class MachineState:
 
     def status(self) -> StatInfo:
         """cnc_statinfo: MEM + STaRT + MoTioN while cutting; reset between parts; ALarM while one is on; HOLD
-        while feed hold is pressed (the cycle's clock runs on: a held machine still counts its parts)."""
+        while feed hold is pressed (the cycle stands: see set_feed_hold)."""
         with self._lock:
             cutting, into = self._cycle.phase_at(self._cycle_time())
             alarm = 1 if self._alarms.any_active() else 0
@@ -258,9 +268,17 @@ class MachineState:
             self._refresh_signals(self._processed)
 
     def set_feed_hold(self, on: bool) -> None:
-        """Press (True) or release (False) feed hold: the status word says HOLD while it is pressed."""
+        """Press (True) or release (False: cycle start) feed hold. While pressed the status word says HOLD and
+        the cycle stands: axes still, feed 0, no part finished; on release it goes on from where it stood."""
         with self._lock:
+            if on and self._held_at is None:
+                self.advance()  # what happened before the press still counts
+                self._held_at = self._time()
+            elif not on and self._held_at is not None:
+                self._held_s += max(0.0, self._time() - self._held_at)
+                self._held_at = None
             self.feed_hold = on
+            self._refresh_signals(self._processed)
 
     def set_param_write_enable(self, on: bool) -> None:
         """The PWE switch (setting screen): parameter writes answer EW_PASSWD while it is off."""
@@ -319,9 +337,9 @@ class MachineState:
             return self._motion.positions(kind, self._cycle_time())
 
     def actual_feed(self) -> float:
-        """Actual feed (mm/min): 0 between parts."""
+        """Actual feed (mm/min): 0 between parts and in feed hold."""
         with self._lock:
-            return self._motion.actual_feed(self._cycle_time(), self.emergency)
+            return self._motion.actual_feed(self._cycle_time(), self.emergency or self.feed_hold)
 
     def spindle_speed(self) -> float:
         """Actual spindle speed (min-1)."""
@@ -329,14 +347,14 @@ class MachineState:
             return self._motion.spindle_speed(self._cycle_time(), self.emergency)
 
     def spindle_loads(self) -> list[float]:
-        """Load meter per spindle (%)."""
+        """Load meter per spindle (%): no cutting load in feed hold (the spindle turns, nothing is cut)."""
         with self._lock:
-            return self._motion.spindle_loads(self._cycle_time(), self.emergency)
+            return self._motion.spindle_loads(self._cycle_time(), self.emergency or self.feed_hold)
 
     def servo_meter(self) -> list[float]:
-        """Servo load meter per axis (%)."""
+        """Servo load meter per axis (%): idle in feed hold."""
         with self._lock:
-            return self._motion.servo_meter(self._cycle_time(), self.emergency)
+            return self._motion.servo_meter(self._cycle_time(), self.emergency or self.feed_hold)
 
     def axis_names(self) -> list[str]:
         return list(self.profile.axis_names)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import socket
 from pathlib import Path
 
 import pytest
@@ -64,3 +66,20 @@ def test_a_machine_with_both_routes_each_function_native_first() -> None:
     assert session.route("write_param") == LIBRARY and session.route("write_macro") == NATIVE
     assert session.route("ReadSpindleLoad") == NATIVE  # the packed surface lacks it; native has it
     assert session.capabilities.can("ReadAlarmHistory") and session.capabilities.can("write_param")
+
+
+async def test_a_library_host_that_stays_down_is_one_warning_not_one_a_tick(caplog: pytest.LogCaptureFixture) -> None:
+    with socket.socket() as probe:  # a port nothing listens on: every connect is refused
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    config = parse_config(BASE + f"    host: 10.0.0.1\n    fwlib_host: 'tcp:127.0.0.1:{port}'\n", "t.yaml", {})
+    session = default_session(machine_settings(config, config.machines[0]))
+    assert isinstance(session, RoutedSession)
+    caplog.set_level(logging.DEBUG, logger="edge.focas.routed")
+    for _ in range(5):  # the poller asks again on every tick that reads a library-routed function
+        await session._connect_library()
+    records = [r for r in caplog.records if r.name == "edge.focas.routed"]
+    warnings = [r.getMessage() for r in records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1 and warnings[0].startswith("connect failed library host peer=")
+    assert "only the functions routed to it fail" in warnings[0]
+    assert sum(r.levelno == logging.DEBUG for r in records) == 4

@@ -17,6 +17,7 @@ from edge.publish.broker_trouble import (
     BrokerTrouble,
     classify,
     duration_text,
+    is_tls_failure,
 )
 
 LOGGER = logging.getLogger("test.broker_trouble")
@@ -111,3 +112,15 @@ def test_a_lost_session_starts_an_outage_measured_from_the_loss(caplog: pytest.L
 
 def test_durations_read_as_people_say_them() -> None:
     assert [duration_text(s) for s in (4.4, 64, 7500)] == ["4s", "1m04s", "2h05m"]
+
+
+@pytest.mark.parametrize(("error", "tls"), [
+    (ssl.SSLCertVerificationError("certificate verify failed"), True),
+    (ssl.SSLError("tlsv13 alert certificate required"), True),
+    (ConnectionRefusedError(111, "Connection refused"), False),
+    (OSError("ssl library said no"), False),  # only the error's type decides the "TLS handshake failed" line
+])
+def test_one_classifier_says_tls_for_the_attempt_line_and_the_reason_alike(error: BaseException, tls: bool) -> None:
+    assert is_tls_failure(error) is tls
+    if tls:
+        assert classify(error) == TLS

@@ -7,7 +7,7 @@ import random
 import socket
 import ssl
 
-from edge.publish.connect_failure import nobody_answered
+from edge.publish.broker_trouble import nobody_answered
 from edge.publish.mqtt import retry_delay
 from edge.publish.settings import PublishSettings
 

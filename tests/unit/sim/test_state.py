@@ -53,3 +53,40 @@ def test_different_seeds_do_not_run_in_step() -> None:
     clock_a.tick(2.0)
     clock_b.tick(2.0)
     assert a.positions() != b.positions()
+
+
+def test_feed_hold_stops_the_cut_until_cycle_start_and_no_part_is_counted_meanwhile() -> None:
+    state, clock = machine(start_parts=7)  # cut 10 s, idle 5 s
+    clock.tick(4.0)  # cutting
+    state.set_feed_hold(True)
+    held_at = (state.positions("absolute"), state.positions("machine"), state.sequence_number())
+    clock.tick(37.0)  # two and a half cycles of real time, all of it held
+    held = state.status()
+    assert (held.run, held.motion) == (2, 0)
+    assert (state.positions("absolute"), state.positions("machine"), state.sequence_number()) == held_at
+    assert state.actual_feed() == 0.0 and state.spindle_loads()[0] == 0.0
+    assert state.spindle_speed() > 0  # the spindle turns on in feed hold, as on a real control
+    assert state.part_count == 7
+    assert state.read_pmc_bytes("F", 0, 0)[0] & 0b0011_0000 == 0b0001_0000  # SPL (hold lamp) on, STL off
+    state.set_feed_hold(False)  # cycle start: the cut goes on from where it stood
+    assert state.status().run == 3 and state.actual_feed() > 0
+    assert state.positions("absolute") == held_at[0]
+    clock.tick(5.9)
+    assert state.part_count == 7  # 4 s cut before the hold + 5.9 s after: not done yet
+    clock.tick(0.2)
+    assert state.part_count == 8
+    clock.tick(15.0)
+    assert state.part_count == 9  # one part per cycle again, the held 37 s left out
+
+
+def test_a_cycle_alarm_after_a_feed_hold_is_stamped_with_its_real_instant() -> None:
+    state, clock = machine(cycle=CycleSpec(cut_seconds=10.0, idle_seconds=5.0, alarm_every=1))
+    before = len(state.alarm_history())  # the seeded history
+    clock.tick(2.0)
+    state.set_feed_hold(True)
+    clock.tick(100.0)
+    state.set_feed_hold(False)
+    clock.tick(8.6)  # the cut ends 8 s after the release; the cycle alarm comes 0.5 s later
+    [event, *_] = state.alarm_events()
+    assert len(state.alarm_history()) == before + 1
+    assert abs(event.utc_time.timestamp() - (clock.now - 0.1)) < 1e-3
