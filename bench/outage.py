@@ -198,7 +198,7 @@ def run(machines: int | None = None, period_s: float | None = None, outage_s: fl
     ]
     result.notes.append("values = Sparkplug metrics delivered (dedup keys); live rate over the 10 s before the "
                         "outage; replay = the daemon reborn to its spool empty (reports every "
-                        f"{REPORT_S:g} s), reconnect = broker back to the daemon reborn (paho's backoff, "
-                        "reconnect_max_s 10 s)")
+                        f"{REPORT_S:g} s), reconnect = broker back to the daemon reborn (while the broker is "
+                        "down the daemon retries within reconnect_probe_s, 1 s, jittered)")
     return result
 

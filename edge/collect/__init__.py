@@ -1,12 +1,12 @@
 """Collecting: one poller per machine, from the CNC's answers to change-filtered samples stamped with CNC time.
 
-What lives here: the poll loop (poller: connect with backoff, static reads, one batched request per tick, dropped
-functions), the plan it polls (plan: reads, groups, metrics, schedule; tick_batch: a tick's prepared request),
-change detection (changes), the CNC clock (clock) and when a CNC answered (answer_time), active alarms and the
-history watermark (alarms), the path count check (path_check), axis-type numbers (axis_numbers), the shared wake-up
-grid (tickgrid), the counters (stats), what it is told about a machine (settings), and the state in the MES
-vocabulary: the status word's table (execution), the utilisation counters (utilisation) and the poller's hook for
-both (plant_state).
+What lives here: the poll loop (poller: connect with backoff, static reads, one batched request per tick,
+dropped functions), the plan it polls (plan: reads, groups, metrics, schedule; tick_batch: a tick's prepared
+request), change detection (changes), the CNC clock (clock) and when a CNC answered (answer_time), active
+alarms and the history watermark (alarms), the path count check (path_check), axis-type numbers
+(axis_numbers), the shared wake-up grid (tickgrid), the start-up gate (start_gate), the counters (stats), what
+it is told about a machine (settings), and the state in the MES vocabulary: the status word's table
+(execution), the utilisation counters (utilisation) and the poller's hook for both (plant_state).
 
 Rules:
 1. collect may import edge.focas (client and codecs), edge.samples, edge.statefile and its own modules.
@@ -27,6 +27,7 @@ from edge.collect.settings import (
     PollSettings,
     Timeouts,
 )
+from edge.collect.start_gate import StartGate
 from edge.collect.stats import CYCLE_BUCKETS
 from edge.collect.tickgrid import TickGrid
 
@@ -43,6 +44,7 @@ __all__ = [
     "PmcValues",
     "PollSettings",
     "SessionFactory",
+    "StartGate",
     "TickGrid",
     "Timeouts",
     "default_session",

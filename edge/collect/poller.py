@@ -45,6 +45,7 @@ from edge.collect.path_check import PATH_COUNT, PathCheck, connect_error
 from edge.collect.plant_state import SPECS as PLANT_STATE_SPECS
 from edge.collect.plant_state import PlantState
 from edge.collect.settings import MachineSettings
+from edge.collect.start_gate import StartGate, StartTicket
 from edge.collect.stats import PollerStats
 from edge.collect.tick_batch import ReadKind, TickBatch
 from edge.collect.tickgrid import TickGrid
@@ -105,7 +106,7 @@ class MachinePoller:
 
     def __init__(self, machine: MachineSettings, sink: DeviceSink, state_dir: Path,
                  session_factory: SessionFactory = default_session, jitter_s: float = 1.0,
-                 grid: TickGrid | None = None) -> None:
+                 grid: TickGrid | None = None, start_gate: StartGate | None = None) -> None:
         self.machine = machine
         self.sink = sink
         self.session = session_factory(machine)
@@ -123,6 +124,7 @@ class MachinePoller:
         self.clock = self._clock.tracker
         self._answer_time = AnswerTime()  # when the CNC answered a tick, for its stamp
         self._jitter_s = jitter_s
+        self._start = StartTicket(start_gate)  # held from the session's connect to the DBIRTH
         self._changes = ChangeDetector()
         self._alarms = ActiveAlarmProjection()
         history_store = WatermarkStore(state_dir, machine.id)
@@ -210,11 +212,13 @@ class MachinePoller:
         while True:
             await self._connect()
             try:
+                await self._start.acquire()  # the start's reads and birth: at most K machines at a time
                 await self._poll_session()
             except FocasError as exc:
                 log.warning("session lost machine=%s error=%s", self.machine_id, exc)
                 self.last_error = f"session lost: {exc}"
             finally:
+                self._start.release()
                 await self._go_offline()
                 await self.session.reset()
 
@@ -302,6 +306,7 @@ class MachinePoller:
         self.online = True
         self.online_changed_at = time.time()
         self.session_up.set()
+        self._start.release()
         if first.events or first.history:
             await self._emit_events(first.events, first.history)
         fastest = min(plan.periods.values())

@@ -12,6 +12,7 @@ down since, and the last error.
 
 from __future__ import annotations
 
+import errno
 import logging
 import socket
 import ssl
@@ -34,6 +35,23 @@ CLOSED = "closed before CONNACK"
 def is_tls_failure(error: BaseException | str) -> bool:
     """A TLS handshake or certificate verification error (not a refused or unreachable TCP connect)."""
     return isinstance(error, ssl.SSLError | ssl.CertificateError)
+
+
+# A TCP connect that met these found nobody at the broker's port: the broker never saw the attempt.
+_NOBODY_THERE = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN,
+                           errno.ETIMEDOUT})
+
+
+def nobody_answered(error: BaseException) -> bool:
+    """The attempt ended before any broker process saw it: the port refused, the host or network was
+    unreachable, or the TCP connect timed out. Such an attempt costs the broker nothing, so it may be repeated
+    often (edge.publish.mqtt probes at ~1 s); a name that does not resolve, a TLS failure or a refused
+    CONNECT are answers, and keep the growing backoff."""
+    if isinstance(error, socket.gaierror) or is_tls_failure(error):
+        return False
+    if isinstance(error, TimeoutError | ConnectionRefusedError):
+        return True
+    return isinstance(error, OSError) and error.errno in _NOBODY_THERE
 
 
 def classify(error: BaseException | str) -> str:

@@ -10,7 +10,11 @@ What this adds to paho:
 - clean session (3.1.1) / clean start with session expiry 0 (5) on every attempt: paho's MQTT 5 default,
   clean start on the first connect only, would break Sparkplug on reconnect;
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
-  lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off);
+  lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off). While
+  nobody listens at the broker's port (refused, unreachable: the broker never sees such an attempt) the
+  delay is capped at `reconnect_probe_s` (~1 s, jittered), so a broker back from an outage is reached within
+  a second, not after a backoff grown to `reconnect_max_s`; a broker that answers and refuses keeps the
+  growing backoff;
 - `on_lost(lasted_s, reason)` for a session the broker ended and we did not, told at the next CONNACK and
   only when that came at the first attempt: a broker that ends a session and takes the client straight back
   is what a taken-over client id looks like, a broker restart or a network loss is not (edge.publish.identity);
@@ -42,7 +46,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
-from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble, is_tls_failure
+from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble, is_tls_failure, nobody_answered
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -80,6 +84,17 @@ def backoff_delay(attempt: int, minimum: float, maximum: float, rng: random.Rand
     return (rng or random).uniform(ceiling / 2, ceiling)
 
 
+def retry_delay(attempt: int, settings: PublishSettings, nobody_answered: bool,
+                rng: random.Random | None = None) -> float:
+    """Delay before retry number `attempt`: the backoff, capped at `reconnect_probe_s` (jittered the same way)
+    when the last attempt found nobody at the broker's port, so the reconnect after an outage is prompt."""
+    delay = backoff_delay(attempt, settings.reconnect_min_s, settings.reconnect_max_s, rng)
+    if nobody_answered:
+        probe = min(settings.reconnect_probe_s, settings.reconnect_max_s)
+        delay = min(delay, (rng or random).uniform(probe / 2, probe))
+    return delay
+
+
 class MqttConnection:
     """A supervised connection; create and use it on the event loop that drives it."""
 
@@ -115,6 +130,7 @@ class MqttConnection:
         self._misc_handle: asyncio.TimerHandle | None = None
         self._attempt = 0  # failed attempts since the last CONNACK
         self._previous_unsent = False  # the previous attempt failed before CONNECT left
+        self._nobody_answered = False  # the last attempt found nobody at the broker's port (retry_delay)
         self._will_tag: object = None
         self._attempt_error: str | None = None  # paho's first error while this attempt awaits its CONNACK
         self._attempt_reported = False  # this attempt's failure is logged already
@@ -229,9 +245,11 @@ class MqttConnection:
         self._attempt_reported = False
         client.on_log = self._paho_log  # until the CONNACK: paho tells its socket errors only there
         self._connecting = True
+        self._nobody_answered = False
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
+            self._nobody_answered = nobody_answered(exc)
             tls = is_tls_failure(exc)
             self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
@@ -401,8 +419,7 @@ class MqttConnection:
     # -- paho callbacks (all on the event loop, but for on_pre_connect: in the connect worker) ----------
 
     def _delay(self) -> float:
-        s = self._settings
-        return backoff_delay(self._attempt, s.reconnect_min_s, s.reconnect_max_s)
+        return retry_delay(self._attempt, self._settings, self._nobody_answered)
 
     def _paho_pre_connect(self, client: paho.Client, userdata: object) -> None:
         will = self._before_connect(self._previous_unsent)

@@ -2,8 +2,13 @@
 
 SQLite in WAL mode, one row per held batch (one tick's changes or one set of alarm events), oldest first by
 row id. A committed row survives kill -9 (WAL, synchronous=NORMAL; a power cut may lose the last few
-commits). Rows leave the spool only when the publisher acknowledges them after a delivery barrier, so a
-crash during replay sends them again: at-least-once, consumers drop duplicates by key (docs/reliability.md).
+commits). On an event loop, every row held during one loop turn is committed in one transaction at the end
+of that turn (a commit costs ~130 us, a row in a shared one ~12 us: 1,000 machines spool 1,000 rows a second
+while the broker is away); a kill -9 inside the turn loses that turn's rows, as it loses the samples of a
+tick not yet held. Without a running loop each hold commits before it returns.
+
+Rows leave the spool only when the publisher acknowledges them after a delivery barrier, so a crash during replay
+sends them again: at-least-once, consumers drop duplicates by key (docs/reliability.md).
 
 Bounds and drop policy (every dropped sample counted in `dropped`, logged once per episode):
 - age: rows spooled more than `max_age_s` ago are deleted, oldest first;
@@ -20,6 +25,8 @@ still cannot be deleted are remembered and never replayed again, and their delet
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import logging
 import sqlite3
@@ -56,6 +63,16 @@ CREATE INDEX IF NOT EXISTS spool_created ON spool (created);
 
 
 @dataclass(frozen=True, slots=True)
+class _Unsaved:
+    """A row held and not yet committed."""
+
+    row: tuple[object, ...]
+    fmt: str
+    size: int
+    samples: int
+
+
+@dataclass(frozen=True, slots=True)
 class SpoolEntry:
     """One held batch: what `hold` was given, with its row id (the replay order and the ack key)."""
 
@@ -72,11 +89,18 @@ def encode_samples(samples: Sequence[Sample]) -> bytes:
     return json.dumps(rows, separators=(",", ":"), default=str).encode("utf-8")
 
 
+# The enum members by their stored values: a dict lookup per sample instead of an enum call (replay decodes
+# every spooled sample; an unknown value falls through to the enum, which says what is wrong).
+_TYPES: dict[object, MetricType] = {t.value: t for t in MetricType}
+_QUALITIES: dict[object, Quality] = {int(q): q for q in Quality}
+
+
 def decode_samples(body: bytes) -> list[Sample]:
     """The inverse of encode_samples; ValueError (with what came) for a body that is not one."""
     try:
         rows = json.loads(body)
-        return [Sample(str(name), value, MetricType(kind), int(ts), Quality(int(quality)))
+        return [Sample(str(name), value, _TYPES.get(kind) or MetricType(kind), int(ts),
+                       _QUALITIES.get(quality) or Quality(int(quality)))
                 for name, value, kind, ts, quality in rows]
     except (TypeError, ValueError, UnicodeDecodeError) as exc:
         raise ValueError(f"spool row: expected a JSON list of [name, value, type, ts, quality], "
@@ -126,6 +150,8 @@ class DiskSpool:
         self.dropped = 0  # samples lost to the bounds (or unreadable rows), since this process started
         self.held = 0  # samples given to hold() (kept or dropped)
         self._episode_dropped: int | None = None  # samples dropped in the current drop episode, or None
+        self._unsaved: list[_Unsaved] = []  # the rows held in this loop turn
+        self._save_scheduled = False
         if self._rows:
             log.info("spool opened with rows waiting path=%s rows=%d bytes=%d", self.path,
                      sum(self._rows.values()), self.bytes)
@@ -133,19 +159,65 @@ class DiskSpool:
     # -- the Spool protocol --------------------------------------------------------------------------
 
     def hold(self, fmt: Format, device_id: str, kind: SampleKind, samples: Sequence[Sample]) -> None:
-        """Append one batch (committed before returning), dropping the oldest rows when it does not fit."""
+        """Append one batch (committed at the end of this loop turn, or before returning without a loop),
+        dropping the oldest rows when it does not fit."""
         if not samples:
             return
         body = encode_samples(samples)
         with self._lock:
-            db = self._conn()
-            self._retry_acked(db)
+            self._conn()
             self.held += len(samples)
-            if not self._insert(db, (fmt, device_id, kind, self._clock(), len(body), body)):
-                self._count_drops(len(samples), "disk")  # nothing older left to drop, or no delete fits
+            row = (fmt, device_id, kind, self._clock(), len(body), body)
+            self._unsaved.append(_Unsaved(row, fmt, len(body), len(samples)))
+            if not self._save_at_turn_end():
+                self._save()
+
+    def _save_at_turn_end(self) -> bool:
+        """Commit the rows held in this loop turn once it ends; False without a running loop."""
+        if self._save_scheduled:
+            return True
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return False
+        self._save_scheduled = True
+        loop.call_soon(self._save_turn)
+        return True
+
+    def _save_turn(self) -> None:
+        with self._lock:
+            self._save_scheduled = False
+            if self._db is None:
                 return
-            self._rows[fmt] += 1
-            self.bytes += len(body)
+            count = sum(u.samples for u in self._unsaved)
+            try:
+                self._save()
+            except sqlite3.Error as exc:  # not a full disk (that drops by the policy): the turn's rows are lost
+                self._unsaved.clear()
+                self.dropped += count
+                log.error("spool write failed, samples lost samples=%d dropped_total=%d path=%s error=%s",
+                          count, self.dropped, self.path, exc)
+
+    def _save(self) -> None:
+        """Commit the rows held and not yet saved: one transaction, or row by row when the disk is full."""
+        rows, self._unsaved = self._unsaved, []
+        if not rows:
+            return
+        db = self._conn()
+        self._retry_acked(db)
+        if self._insert_all(db, [u.row for u in rows]):
+            saved = rows
+        else:
+            saved = []
+            for u in rows:
+                if self._insert(db, u.row):
+                    saved.append(u)
+                else:
+                    self._count_drops(u.samples, "disk")  # nothing older left to drop, or no delete fits
+        for u in saved:
+            self._rows[u.fmt] += 1
+            self.bytes += u.size
+        if saved:
             self._enforce_bounds(db)
             self._recover_headroom()
 
@@ -159,6 +231,8 @@ class DiskSpool:
     def pending(self, fmt: Format | None = None) -> int:
         """Rows waiting (for one format, or all); acknowledged rows not yet deleted are not waiting."""
         with self._lock:
+            if self._db is not None:
+                self._save()
             if fmt is None:
                 return sum(self._rows.values()) - len(self._acked)
             return self._rows[fmt] - sum(1 for f in self._acked.values() if f == fmt)
@@ -166,6 +240,7 @@ class DiskSpool:
     def spooled_rate(self, fmt: Format) -> float | None:
         """Rows per second at which the waiting rows of one format were spooled (None under 2 rows or 1 s)."""
         with self._lock:
+            self._save()
             count, first, last = self._conn().execute(
                 "SELECT COUNT(*), MIN(created), MAX(created) FROM spool WHERE fmt = ?", (fmt,)).fetchone()
         if count < 2 or last - first < 1.0:
@@ -178,6 +253,7 @@ class DiskSpool:
         A row whose body cannot be read is deleted and counted as dropped (it would block replay forever).
         """
         with self._lock:
+            self._save()
             db = self._conn()
             self._retry_acked(db)
             self._enforce_age(db)
@@ -225,10 +301,13 @@ class DiskSpool:
         """Checkpoint the WAL into the main file (shutdown; every hold is already committed)."""
         with self._lock:
             if self._db is not None:
+                self._save()
                 self._checkpoint(self._db, "TRUNCATE")
 
     def close(self) -> None:
         with self._lock:
+            if self._db is not None:
+                self._save()
             db, self._db = self._db, None
             if db is not None:
                 try:
@@ -243,12 +322,26 @@ class DiskSpool:
             raise RuntimeError(f"spool {self.path} is closed")
         return self._db
 
+    def _insert_all(self, db: sqlite3.Connection, rows: list[tuple[object, ...]]) -> bool:
+        """INSERT the rows in one transaction; False (nothing inserted) when the disk or the cap is full."""
+        try:
+            db.execute("BEGIN")
+            db.executemany(_INSERT, rows)
+            db.execute("COMMIT")
+        except sqlite3.OperationalError as exc:
+            if db.in_transaction:
+                with contextlib.suppress(sqlite3.Error):
+                    db.execute("ROLLBACK")
+            if not is_full(exc):
+                raise
+            return False
+        return True
+
     def _insert(self, db: sqlite3.Connection, row: tuple[object, ...]) -> bool:
         """INSERT the row; on SQLITE_FULL drop the oldest rows to make room and try again."""
         for _ in range(_ROOM_ATTEMPTS):
             try:
-                db.execute("INSERT INTO spool (fmt, device, kind, created, size, body) VALUES (?, ?, ?, ?, ?, ?)",
-                           row)
+                db.execute(_INSERT, row)
                 return True
             except sqlite3.OperationalError as exc:
                 if not is_full(exc):
@@ -290,14 +383,21 @@ class DiskSpool:
             log.debug("spool checkpoint postponed: disk full")
 
     def _retry_acked(self, db: sqlite3.Connection) -> None:
-        """Delete acknowledged rows in small transactions, each checkpointed, so the WAL stays small; on a
-        full disk free the headroom and try once more, else keep the rest for the next call."""
+        """Delete acknowledged rows in transactions of _DELETE_ROWS, each checkpointed, so the WAL stays small;
+        on a full disk in smaller ones, then with the headroom freed, else keep the rest for the next call."""
         ids = sorted(self._acked)
-        for start in range(0, len(ids), _ROOM_ROWS * 4):
-            chunk = ids[start:start + _ROOM_ROWS * 4]
-            if not (self._try_delete(db, chunk) or (self.headroom.release() and self._try_delete(db, chunk))):
-                log.debug("acknowledged spool rows kept for a later delete: disk full rows=%d", len(self._acked))
-                return
+        size, start = _DELETE_ROWS, 0
+        while start < len(ids):
+            chunk = ids[start:start + size]
+            if not self._try_delete(db, chunk):
+                if size > _FULL_DISK_DELETE_ROWS:
+                    size = _FULL_DISK_DELETE_ROWS  # a full disk: what a small delete needs may still fit
+                    continue
+                if not (self.headroom.release() and self._try_delete(db, chunk)):
+                    log.debug("acknowledged spool rows kept for a later delete: disk full rows=%d",
+                              len(self._acked))
+                    return
+            start += len(chunk)
             self._checkpoint(db, "PASSIVE")
 
     def _try_delete(self, db: sqlite3.Connection, ids: list[int]) -> bool:
@@ -384,8 +484,13 @@ class DiskSpool:
             self._episode_dropped = None
 
 
+_INSERT = "INSERT INTO spool (fmt, device, kind, created, size, body) VALUES (?, ?, ?, ?, ?, ?)"
 _ROOM_ATTEMPTS = 8  # rounds of dropping before a row that still does not fit is dropped itself
 _ROOM_ROWS = 16  # oldest rows dropped per round
+# Acknowledged rows deleted per transaction (each checkpointed): a replay step acks ~0.1 s of rows, over a
+# thousand at 1,000 machines; ~0.3 MB of WAL, well inside its limit, and one checkpoint instead of eight.
+_DELETE_ROWS = 500
+_FULL_DISK_DELETE_ROWS = _ROOM_ROWS * 4
 
 
 def _sample_count(body: bytes) -> int:

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from edge import ConfigError, __version__
-from edge.collect import MachinePoller, MachineSettings, SessionFactory, TickGrid, default_session
+from edge.collect import MachinePoller, MachineSettings, SessionFactory, StartGate, TickGrid, default_session
 from edge.command import CommandService
 from edge.config import GATEWAY_ENV, Config, MachineConfig, listen_port, load_config
 from edge.config.listen_port import bind_problem
@@ -45,6 +45,9 @@ NODE_METRICS_PERIOD_S = 5.0
 # Machines started per second at start-up: each start (connect, static reads, plan, DBIRTH) costs the loop
 # milliseconds, and 1,000 of them in the same second kept answers waiting past the request timeout.
 STARTS_PER_S = 200.0
+# Machines between their CNC session's connect and their DBIRTH at a time (edge.collect.start_gate): bounds
+# the start-up work in front of every answer, so the request deadlines measure the CNC, not the loop.
+START_SLOTS = 64
 SYSTEMD_STATUS_PERIOD_S = 1.0
 
 
@@ -68,6 +71,7 @@ class Daemon:
         self.publisher = Publisher(settings, spool=self.spool)
         self.pollers: dict[str, MachinePoller] = {}
         self.tick_grid = TickGrid(config.poll_grid_step_s)  # machines due in the same slot share one loop turn
+        self.start_gate = StartGate(START_SLOTS)
         self.commands = CommandService(command_settings(config), self.publisher, self.pollers)
         self.opcua = opcua_output(opcua_settings(config), self.commands)  # None unless opcua.enabled
         # What the plant page draws; the page is its only reader, and `http` takes effect at a restart only:
@@ -233,7 +237,8 @@ class Daemon:
     # ---- machines ------------------------------------------------------------------------------------
     def _start_machine(self, machine: MachineConfig, spread_s: float = 1.0) -> None:
         poller = MachinePoller(machine_settings(self.config, machine), self.outputs, self.state_dir,
-                               self.session_factory, jitter_s=spread_s, grid=self.tick_grid)
+                               self.session_factory, jitter_s=spread_s, grid=self.tick_grid,
+                               start_gate=self.start_gate)
         self.pollers[machine.id] = poller
         task = asyncio.create_task(poller.run(), name=f"poll-{machine.id}")
         task.add_done_callback(self._poller_done)

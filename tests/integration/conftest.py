@@ -8,6 +8,7 @@ import pytest
 
 from tests.helpers import Mosquitto
 from tests.integration.mqtt_observer import Observer
+from tests.integration.tcp_relay import TcpRelay
 
 
 @pytest.fixture
@@ -16,3 +17,12 @@ async def observer(mosquitto: Mosquitto) -> AsyncIterator[Observer]:
     obs = Observer(mosquitto)
     yield obs
     obs.close()
+
+
+@pytest.fixture
+async def relay(mosquitto: Mosquitto) -> AsyncIterator[TcpRelay]:
+    """A TCP relay to the test's broker: the daemon's broker address, which a drill can shape."""
+    r = TcpRelay(mosquitto.host, mosquitto.port)
+    await r.start()
+    yield r
+    await r.close()

@@ -6,15 +6,18 @@ body (number, type, raise/clear, occurrence) is part of it, since two events can
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from edge.publish.publisher import Publisher
 from edge.samples import Sample
+from edge.sim.fleet import Fleet, MachineSpec
 from tests.integration.mqtt_observer import Received
 
 Key = tuple[Any, ...]
@@ -165,11 +168,20 @@ def now() -> float:
     return time.monotonic()
 
 
+@contextlib.asynccontextmanager
+async def changing_fleet(machines: int) -> AsyncIterator[Fleet]:
+    """Simulated 30i machines whose Macro/500 changes every 50 ms: every tick of 0.1 s or more has deltas."""
+    async with Fleet([MachineSpec(profile="30i") for _ in range(machines)], base_port=0) as fleet:
+        changer = asyncio.create_task(keep_changing(list(fleet)))
+        try:
+            yield fleet
+        finally:
+            changer.cancel()
+
+
 async def keep_changing(machines: Sequence[Any], period_s: float = 0.05, macro: int = 500) -> None:
     """Write a new value to one macro of every machine each `period_s` (cancel to stop), so every poll
     tick has a delta to publish."""
-    import asyncio
-
     value = 0.0
     while True:
         value += 1.0

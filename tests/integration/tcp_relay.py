@@ -3,7 +3,9 @@
 - `accepting = False`: new connections are closed at once (the broker is "still down" for the daemon
   while the test's own subscriber is already back);
 - `blackhole()`: keep every socket open but forward nothing (a pulled cable: no FIN, no RST);
-- `cut()`: abort every relayed connection.
+- `cut()`: abort every relayed connection;
+- `stop_listening()` / `start()`: nothing listens at the port, then the same port again (a connect is refused,
+  as at a broker that is down: the attempt reaches no broker at all).
 """
 
 from __future__ import annotations
@@ -38,6 +40,14 @@ class TcpRelay:
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+
+    async def stop_listening(self) -> None:
+        """Close the listener (and every relayed connection): connects to the port are refused until start()."""
+        server, self._server = self._server, None
+        if server is not None:
+            server.close()
+            await server.wait_closed()
+        self.cut()
 
     def blackhole(self) -> None:
         self.forwarding = False

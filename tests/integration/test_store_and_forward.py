@@ -31,13 +31,13 @@ from edge.publish.sparkplug_b_pb2 import Payload
 from edge.publish.spool import decode_samples
 from edge.samples import MetricType, Sample
 from edge.service.daemon import Daemon
-from edge.sim.fleet import Fleet, MachineSpec
+from edge.sim.fleet import Fleet
 from tests.helpers import Mosquitto, async_wait_for
 from tests.integration.delivery import (
     Collected,
+    changing_fleet,
     compare,
     json_arrivals,
-    keep_changing,
     key_of,
     sparkplug_arrivals,
 )
@@ -72,21 +72,9 @@ machines:
 
 
 @pytest.fixture
-async def relay(mosquitto: Mosquitto) -> AsyncIterator[TcpRelay]:
-    r = TcpRelay(mosquitto.host, mosquitto.port)
-    await r.start()
-    yield r
-    await r.close()
-
-
-@pytest.fixture
 async def fleet() -> AsyncIterator[Fleet]:
-    """Five machines whose Macro/500 changes every 50 ms: every 0.1 s tick has deltas."""
-    async with Fleet([MachineSpec(profile="30i") for _ in range(MACHINES)], base_port=0) as f:
-        changer = asyncio.create_task(keep_changing(list(f)))
+    async with changing_fleet(MACHINES) as f:
         yield f
-        changer.cancel()
-
 
 async def start(text: str, policy: ForwardingPolicy = FAST) -> tuple[Daemon, asyncio.Task[int], Collected]:
     daemon = Daemon(parse_config(text))

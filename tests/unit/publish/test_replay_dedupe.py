@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
-from edge.publish.replay_dedupe import DeliveredValues
+import json
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from edge.publish.replay_dedupe import DeliveredValues, value_key
 from edge.samples import MetricType, Sample
 
 
@@ -50,3 +55,10 @@ def test_an_acknowledged_rows_samples_are_forgotten() -> None:
     d.proven(d.mark())
     d.discard("m1", [s(1)])
     assert len(d) == 1 and d.fresh("m1", [s(1), s(2)]) == [s(1)]
+
+
+@given(st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(),
+                 st.lists(st.one_of(st.integers(), st.floats(allow_nan=False), st.text()), max_size=4)))
+def test_a_value_key_is_the_value_as_the_spool_writes_it(value: object) -> None:
+    """The fast spellings of scalars equal json's, so a value and its copy through the spool share a key."""
+    assert value_key(value) == json.dumps(value, separators=(",", ":"), sort_keys=True, default=str)

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -211,3 +213,28 @@ def test_a_corrupt_spool_file_is_moved_aside_and_a_new_spool_keeps_samples(
         assert spool.pending("sparkplug") == 1
     finally:
         spool.close()
+
+
+def committed_rows(path: Path) -> int:
+    """Rows another connection sees: what a kill -9 now would leave."""
+    with contextlib.closing(sqlite3.connect(str(path))) as db:
+        return int(db.execute("SELECT COUNT(*) FROM spool").fetchone()[0])
+
+
+async def test_on_a_loop_the_rows_of_one_turn_are_committed_together_when_it_ends(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    spool = DiskSpool(path)
+    for i in range(200):
+        spool.hold("sparkplug", f"m{i % 7}", "data", [sample(i)])
+    assert committed_rows(path) == 0, "one transaction at the end of the turn, not one per row"
+    await asyncio.sleep(0)  # the turn ends
+    assert committed_rows(path) == 200
+    spool.hold("sparkplug", "m1", "data", [sample(200)])
+    assert spool.pending() == 201, "a read sees the rows of the current turn"
+    entries = spool.oldest("sparkplug", 1000)
+    assert [e.samples[0].value for e in entries] == [float(i) for i in range(201)]
+    spool.hold("sparkplug", "m1", "data", [sample(201)])
+    spool.close()  # saves what the turn held
+    again = DiskSpool(path)
+    assert again.pending() == 202
+    again.close()
