@@ -111,6 +111,9 @@ async def test_only_the_moved_elements_are_published(tmp_path: Path) -> None:
     assert await _tick_values(poller, plan) == {"Macro/503": 0.0}  # NaN stays NaN: not published again
     session.macros = [math.nan, 7, 3.0, 0.0]  # an int equal to the float before: the same Double value
     assert await _tick_values(poller, plan) == {}
+    session.macros = [math.nan, 8, 3.0, 0.0]  # a moved int element is coerced alone, as the whole list would be
+    moved = await _tick_values(poller, plan)
+    assert moved == {"Macro/501": 8.0} and type(moved["Macro/501"]) is float
 
 
 async def test_a_value_reported_between_ticks_is_published_again_when_the_read_gives_the_old_one(
