@@ -73,7 +73,7 @@ class DeviceSink(Protocol):
     async def device_offline(self, device_id: str) -> None: ...
 
 
-@dataclass
+@dataclass(slots=True)
 class TickResult:
     samples: list[Sample]
     events: list[Sample]  # alarm raise/clear
