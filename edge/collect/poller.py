@@ -439,7 +439,8 @@ class MachinePoller:
             elif kind is ReadKind.STATUS:
                 status = result
             coercion = batch.elementwise[index]
-            if coercion is not None and type(previous) is list and type(result) is list:
+            if (coercion is not None and type(previous) is list and type(result) is list
+                    and len(result) == len(previous)):  # a list that grew offers its new elements in full
                 # A list that moved (macros, a PMC range, positions): offer only the elements that moved,
                 # each coerced as the extractor would; an equal element was offered last tick and nothing
                 # has reported that metric since. Most elements do not move: none is extracted.
