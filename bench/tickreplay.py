@@ -17,6 +17,7 @@ import argparse
 import asyncio
 import collections
 import gc
+import hashlib
 import pickle
 import tempfile
 import time
@@ -30,6 +31,7 @@ from bench.workload import CLOCK_MACRO, STAMP_MACRO, machines_section
 from edge.collect import plan as pl
 from edge.collect import poller as poller_module
 from edge.collect.changes import ChangeDetector
+from edge.collect.plant_state import SPECS as PLANT_STATE_SPECS
 from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
 from edge.config import parse_config
@@ -121,7 +123,8 @@ class _Replayed:
         return self._next()
 
 
-async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode: str) -> None:
+async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode: str,
+                  digest: bool = False) -> None:
     answers: dict[bytes, list[Frame]] = collections.defaultdict(list)
     for data, frame in recording["frames"]:
         answers[data].append(frame)
@@ -133,6 +136,7 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
     topics = mqtt_wire.TopicCache(v5=True)
     sent: list[bytes] = []
     clock = _Replayed()
+    published = hashlib.sha256()  # every published (machine, name, value, type, timestamp, quality), in order
 
     with tempfile.TemporaryDirectory() as state:
         pollers = []
@@ -159,7 +163,7 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
             poller._changes = ChangeDetector(plan.deadbands())
             poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
             poller._clock.new_session()
-            node.device_online(machine.id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS], [])
+            node.device_online(machine.id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS, *PLANT_STATE_SPECS], [])
             pollers.append((poller, plan))
 
         def publish(device_id: str, samples: Any) -> None:
@@ -168,6 +172,10 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
                 assert prefix is not None
                 sent.append(mqtt_wire.publish_packet(prefix, message.payload))
             outbox.record(HeldBatch(device_id, "data", samples))
+            if digest:
+                for s in samples:
+                    published.update(repr((device_id, s.name, s.value, s.type.value, s.timestamp_ms,
+                                           int(s.quality))).encode())
 
         ticks = recording["ticks"]
         if gc_mode == "off":
@@ -202,6 +210,8 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
                           f"{cpu / count * 1e6:.1f} us/tick")
         finally:
             poller_module.time = time  # type: ignore[assignment]
+        if digest:
+            print(f"digest of the published samples: {published.hexdigest()}")
 
 
 def main() -> None:
@@ -215,13 +225,16 @@ def main() -> None:
     parser.add_argument("--gc", default="daemon",
                         help="collector settings: daemon (the daemon's), refreeze (and freeze after warming up), "
                              "young=N, default (CPython's), off")
+    parser.add_argument("--digest", action="store_true",
+                        help="print a digest of every published sample (the same in two trees: same output)")
     args = parser.parse_args()
     if args.mode == "record":
         recording = asyncio.run(_record(args.period, args.seconds))
         args.file.write_bytes(pickle.dumps(recording))
         print(f"recorded {len(recording['ticks'])} ticks, {len(recording['frames'])} frames")
     else:
-        asyncio.run(_replay(pickle.loads(args.file.read_bytes()), args.machines, args.rounds, args.gc))
+        asyncio.run(_replay(pickle.loads(args.file.read_bytes()), args.machines, args.rounds, args.gc,
+                           args.digest))
 
 
 if __name__ == "__main__":

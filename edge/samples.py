@@ -63,6 +63,12 @@ class MetricSpec:
     description: str | None = None
 
 
+# Each Sample field's slot setter, in field order: a Sample built without its frozen __init__ (new_sample,
+# and edge.collect.changes inline, where a Python call per changed value is worth saving).
+SAMPLE_SLOT_SETTERS = tuple(getattr(Sample, name).__set__
+                            for name in ("name", "value", "type", "timestamp_ms", "quality", "historical"))
+
+
 def _sample_builder() -> Callable[..., Sample]:
     """`new_sample(name, value, type, timestamp_ms, quality)`: the Sample that `Sample(...)` builds.
 
@@ -70,8 +76,7 @@ def _sample_builder() -> Callable[..., Sample]:
     poll tick builds one per changed value, so its change detector sets the slots directly (0.35 us).
     """
     new = object.__new__
-    set_name, set_value, set_type, set_timestamp, set_quality, set_historical = (
-        getattr(Sample, name).__set__ for name in ("name", "value", "type", "timestamp_ms", "quality", "historical"))
+    set_name, set_value, set_type, set_timestamp, set_quality, set_historical = SAMPLE_SLOT_SETTERS
 
     def new_sample(name: str, value: object, kind: MetricType, timestamp_ms: int, quality: Quality) -> Sample:
         sample = new(Sample)

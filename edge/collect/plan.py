@@ -434,10 +434,21 @@ def elementwise(read: PlannedRead) -> bool:
     ranges, positions, loads). Then an element equal to, and of the same type as, the element the read
     gave last tick yields the value already offered for that metric last tick, so a tick may skip it
     (edge.collect.poller). Mirrors value_extractor's `floats` and `ints` cases."""
+    return element_coercion(read) is not None
+
+
+def element_coercion(read: PlannedRead) -> tuple[type, Callable[[object], object]] | None:
+    """For an elementwise read, what each element becomes: (the type it already has when no coercion is
+    needed, the coercion otherwise), as value_extractor's `floats` and `ints` apply it. The tick coerces
+    only the elements that moved, without extracting the whole list; None for any other read."""
     if read.bits or _picker(read.item) is not _as_list:
-        return False
+        return None
     coercers = {_COERCERS.get(spec.type, _unchanged) for spec in read.metrics}
-    return coercers in ({_to_float}, {_to_int})
+    if coercers == {_to_float}:
+        return float, _to_float
+    if coercers == {_to_int}:
+        return int, _to_int
+    return None
 
 
 def _picker(item: it.ReadItem) -> Callable[[Any], Sequence[object]]:

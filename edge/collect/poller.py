@@ -76,7 +76,7 @@ class DeviceSink(Protocol):
     async def device_offline(self, device_id: str) -> None: ...
 
 
-@dataclass
+@dataclass(slots=True)
 class TickResult:
     samples: list[Sample]
     events: list[Sample]  # alarm raise/clear
@@ -441,16 +441,20 @@ class MachinePoller:
                 alarm_status = int(result)
             elif kind is ReadKind.STATUS:
                 status = result
-            values = batch.extractors[index](result)
-            if batch.elementwise[index] and type(previous) is list and type(result) is list:
-                # A list that moved (macros, a PMC range, positions): offer only the elements that moved;
-                # an equal element was offered last tick and nothing has reported that metric since.
-                for spec, value, new, old in zip(read.metrics, values, result, previous, strict=False):
+            coercion = batch.elementwise[index]
+            if (coercion is not None and type(previous) is list and type(result) is list
+                    and len(result) == len(previous)):  # a list that grew offers its new elements in full
+                # A list that moved (macros, a PMC range, positions): offer only the elements that moved,
+                # each coerced as the extractor would; an equal element was offered last tick and nothing
+                # has reported that metric since. Most elements do not move: none is extracted.
+                wanted, coerce = coercion
+                for spec, new, old in zip(read.metrics, result, previous, strict=False):
                     if new != old or type(new) is not type(old):
-                        sample = report(spec.name, value, spec.type, timestamp)
+                        sample = report(spec.name, new if type(new) is wanted else coerce(new), spec.type, timestamp)
                         if sample is not None:
                             samples.append(sample)
                 continue
+            values = batch.extractors[index](result)
             # A None value read fine (a vacant macro, an empty position slot): good quality, null value.
             for spec, value in zip(read.metrics, values, strict=False):
                 sample = report(spec.name, value, spec.type, timestamp)

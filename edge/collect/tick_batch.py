@@ -40,7 +40,9 @@ class TickBatch:
     kinds: tuple[ReadKind, ...]
     extractors: tuple[pl.ValueExtractor, ...]
     positions: tuple[int, ...]  # per read, its index in the plan's reads
-    elementwise: tuple[bool, ...]  # per read, plan.elementwise: unchanged elements of a moved list are skipped
+    # Per read, plan.element_coercion (None: not elementwise): unchanged elements of a moved list are skipped,
+    # the moved ones coerced one by one.
+    elementwise: tuple[tuple[type, Callable[[object], object]] | None, ...]
     previous: Callable[[list[object]], tuple[object, ...]]  # the per-plan list -> this batch's entries
     indices: range  # 0..len(reads)-1
 
@@ -64,7 +66,7 @@ class TickBatch:
         else:
             previous = lambda last: ()  # noqa: E731
         return cls(tuple(reads), (*(r.item for r in reads), it.ReadClock()), kinds,
-                   tuple(extractor(r) for r in reads), where, tuple(pl.elementwise(r) for r in reads), previous,
+                   tuple(extractor(r) for r in reads), where, tuple(pl.element_coercion(r) for r in reads), previous,
                    range(len(reads)))
 
     @classmethod

@@ -293,8 +293,13 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        known = self._known(device_id, dev, samples)
-        dev.last.update(zip(map(_name_of, known), known, strict=True))
+        names = list(map(_name_of, samples))
+        if all(map(dev.specs.__contains__, names)):  # every value of a poll tick: no filtering
+            known = samples
+        else:
+            known = self._known(device_id, dev, samples)
+            names = list(map(_name_of, known))
+        dev.last.update(zip(names, known, strict=True))
         if not (self.live and dev.online) or not known:
             return []
         return [self._data(dev.data_topic, dev, known)]

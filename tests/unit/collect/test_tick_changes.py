@@ -111,6 +111,9 @@ async def test_only_the_moved_elements_are_published(tmp_path: Path) -> None:
     assert await _tick_values(poller, plan) == {"Macro/503": 0.0}  # NaN stays NaN: not published again
     session.macros = [math.nan, 7, 3.0, 0.0]  # an int equal to the float before: the same Double value
     assert await _tick_values(poller, plan) == {}
+    session.macros = [math.nan, 8, 3.0, 0.0]  # a moved int element is coerced alone, as the whole list would be
+    moved = await _tick_values(poller, plan)
+    assert moved == {"Macro/501": 8.0} and type(moved["Macro/501"]) is float
 
 
 async def test_a_value_reported_between_ticks_is_published_again_when_the_read_gives_the_old_one(
@@ -123,3 +126,11 @@ async def test_a_value_reported_between_ticks_is_published_again_when_the_read_g
     await poller.report([Sample("Macro/500", 9.0, MetricType.DOUBLE, 1)])
     session.macros = [1.0, 2.0, 3.0, 6.0]
     assert await _tick_values(poller, plan) == {"Macro/500": 1.0, "Macro/503": 6.0}
+
+
+async def test_an_element_the_last_answer_lacked_is_published(tmp_path: Path) -> None:
+    poller, session, plan = await _ready(tmp_path)
+    session.macros = [1.0, 2.0, 3.0]  # a short answer: Macro/503 has no value yet
+    assert await _tick_values(poller, plan) == {"Macro/500": 1.0, "Macro/501": 2.0, "Macro/502": 3.0}
+    session.macros = [1.0, 2.0, 3.0, 4.0]
+    assert await _tick_values(poller, plan) == {"Macro/503": 4.0}
