@@ -185,7 +185,7 @@ class _Pacer:
     of a step on top, and a 12x pace delivered 9x).
 
     Behind the pace, a yield costs a whole event-loop turn, which under the live load of a large fleet is
-    far longer than a chunk's work (1,000 machines: one chunk of 50 rows per turn, ~70 rows/s). So, behind
+    far longer than a chunk's work (1,000 machines: ~0.5 s a turn, one chunk of 50 rows each, ~90 rows/s). So, behind
     the pace, the replay keeps the loop for up to SLICE_S of work before it yields."""
 
     def __init__(self, started: float, rate: float) -> None:
