@@ -19,7 +19,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import psutil
 
@@ -55,7 +55,14 @@ class FleetOptions:
     same_plan: bool = False  # loads and counters every 10th and 100th tick at any period (as at 10 Hz)
 
 
-def config_text(broker: Mosquitto, state_dir: Path, ports: list[int], period_s: float, same_plan: bool = False) -> str:
+class Endpoint(Protocol):
+    """Where the daemon connects: the broker, or a relay in front of it."""
+
+    host: str
+    port: int
+
+
+def config_text(broker: Endpoint, state_dir: Path, ports: list[int], period_s: float, same_plan: bool = False) -> str:
     return (f"mqtt:\n  host: {broker.host}\n  port: {broker.port}\n  formats: [sparkplug]\n"
             f"  sparkplug: {{group_id: {GROUP}, edge_node_id: gw}}\n"
             f"state_dir: {state_dir}\nmachines:\n{machines_section(ports, period_s, same_plan)}")

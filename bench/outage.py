@@ -13,6 +13,7 @@ live rate while the backlog drained, and RSS and descriptors before, during and 
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import shutil
@@ -31,6 +32,7 @@ from bench.procs import REPO, python_env, running_broker, stop_sims
 from bench.report import Check, Result
 from tests.helpers import Mosquitto
 from tests.integration.delivery import key_of
+from tests.integration.tcp_relay import TcpRelay
 from tests.soak.__main__ import Checker, Key
 
 REPORT_S = 0.5
@@ -55,6 +57,36 @@ class ArrivalCounter(Checker):
         """Values per second over whole seconds in [start, end)."""
         seconds = range(int(start) + 1, int(end))
         return sum(counts[s] for s in seconds) / len(seconds) if seconds else float("nan")
+
+
+class RelayThread:
+    """The daemon reaches the broker only through a TCP relay (run on its own event loop thread), so the
+    bench decides when the daemon can reach the broker again: after the checker has resubscribed, else the
+    first replayed rows (and the births naming their aliases) could reach the broker before the checker."""
+
+    def __init__(self, broker: Mosquitto) -> None:
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True)
+        self._thread.start()
+        self.relay = TcpRelay(broker.host, broker.port)
+        self.host, self.port = self.relay.host, self.relay.port
+        self.open()
+
+    def _call(self, coro: Any) -> None:
+        asyncio.run_coroutine_threadsafe(coro, self._loop).result(30)
+
+    def open(self) -> None:
+        self._call(self.relay.start())
+
+    def shut(self) -> None:
+        """Nothing listens at the relay's port (a connect is refused, as at a broker that is down)."""
+        self._call(self.relay.stop_listening())
+
+    def close(self) -> None:
+        self._call(self.relay.close())
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(5)
+        self._loop.close()
 
 
 class SoakChild:
@@ -107,17 +139,19 @@ def run_outage(machines: int, period_s: float, outage_s: float, after_s: float) 
         broker = stack.enter_context(running_broker())
         checker = ArrivalCounter(broker)
         stack.callback(checker.close)
+        relay = RelayThread(broker)
+        stack.callback(relay.close)
         sims = start_fleet_sims(machines)
         stack.callback(stop_sims, sims)
         ports = [port for sim in sims for port in sim.ports]
         config, keys = workdir / "edge.yaml", workdir / "collected.jsonl"
-        config.write_text(config_text(broker, workdir / "state", ports, period_s))
+        config.write_text(config_text(relay, workdir / "state", ports, period_s))
         child = SoakChild(config, keys, workdir / "daemon.log")
         stack.callback(child.stop)
         wait_until(lambda: child.last.get("born") and child.last.get("online") == machines, 60 + machines * 0.1,
                    f"{machines} machines online and born")
         time.sleep(WARMUP_S)
-        outcome.update(_outage(broker, checker, child, machines, period_s, outage_s, after_s))
+        outcome.update(_outage(broker, relay, checker, child, machines, period_s, outage_s, after_s))
         outcome["daemon_exit"] = child.stop()
         time.sleep(2.0)  # the checker's last messages
         outcome.update(_losses(keys, checker))
@@ -131,18 +165,20 @@ def _tidy(workdir: Path, outcome: dict[str, Any]) -> None:
         print(f"  outage: logs kept in {workdir}", flush=True)
 
 
-def _outage(broker: Mosquitto, checker: ArrivalCounter, child: SoakChild, machines: int, period_s: float,
-            outage_s: float, after_s: float) -> dict[str, Any]:
+def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, child: SoakChild, machines: int,
+            period_s: float, outage_s: float, after_s: float) -> dict[str, Any]:
     before = dict(child.last)
     live_before = checker.rate(checker.live, time.time() - 10, time.time())
     killed = time.time()
     broker.stop(kill=True)
+    relay.shut()
     checker.subscribed.clear()
     time.sleep(outage_s)
     during = [r for r in child.reports if r["time"] >= killed]
     broker.start()
-    back = time.time()
     wait_until(lambda: checker.subscribed.is_set(), 30, "the checker resubscribed")
+    relay.open()  # only now can the daemon reach the broker: the checker misses nothing it sends
+    back = time.time()
     wait_until(lambda: child.last.get("born") and child.last["time"] > back, 60, "the daemon reborn")
     born = next(r["time"] for r in child.reports if r["time"] > back and r.get("born"))
     wait_until(lambda: child.last["time"] > born and child.last.get("spool_rows") == 0, 900, "the spool drained")
