@@ -38,11 +38,9 @@ from typing import Any
 
 from bench.floor import DroppingSink
 from bench.latency_daemon import Window, lag_probe, watch_collector, watch_grid
+from bench.tickreplay import begin_session
 from bench.workload import machines_section
 from edge.collect import plan as pl
-from edge.collect import poller as poller_module
-from edge.collect.changes import ChangeDetector
-from edge.collect.plant_state import SPECS as PLANT_STATE_SPECS
 from edge.collect.poller import MachinePoller
 from edge.collect.tickgrid import TickGrid
 from edge.config import parse_config
@@ -137,14 +135,7 @@ async def _paced(recording: dict[str, Any], machines: int, seconds: float, rtt: 
         async def run(machine: PacedMachine) -> None:
             await asyncio.sleep(random.uniform(0, max(1.0, machines / STARTS_PER_S)))
             poller = machine.poller
-            static = await poller._read_static()
-            plan = pl.MachinePlan.build(poller.machine.poll, static)
-            poller._full_plan = poller._plan = plan
-            poller._changes = ChangeDetector(plan.deadbands())
-            poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
-            poller._clock.new_session()
-            specs = [*plan.metrics(), poller_module.DROPPED_FUNCTIONS, *PLANT_STATE_SPECS]
-            node.device_online(poller.machine_id, specs, [])
+            plan = await begin_session(poller, node)
             schedule = pl.Schedule(plan.periods)
             schedule.start(time.monotonic())
             schedule.due(time.monotonic())

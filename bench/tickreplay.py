@@ -46,6 +46,20 @@ from edge.service.gc_tuning import tune_collector
 from edge.service.settings import machine_settings
 
 
+async def begin_session(poller: MachinePoller, node: SparkplugNode) -> pl.MachinePlan:
+    """What the poller does between connect and its first tick, for a replayed session: the static reads, the
+    plan, fresh change detection and clock, and the device's DBIRTH (the replays share it)."""
+    static = await poller._read_static()
+    plan = pl.MachinePlan.build(poller.machine.poll, static)
+    poller._full_plan = poller._plan = plan
+    poller._changes = ChangeDetector(plan.deadbands())
+    poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
+    poller._clock.new_session()
+    node.device_online(poller.machine_id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS, *PLANT_STATE_SPECS], [])
+    return plan
+
+
+
 def _config(period: float, ports: list[int]) -> Any:
     return parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
                         f"machines:\n{machines_section(ports, period)}", "replay", {})
@@ -157,14 +171,7 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
             client.sysinfo = recording["sysinfo"]
             client.context = Context.from_sysinfo(recording["sysinfo"])
             client._connected = True
-            static = await poller._read_static()
-            plan = pl.MachinePlan.build(poller.machine.poll, static)
-            poller._full_plan = poller._plan = plan
-            poller._changes = ChangeDetector(plan.deadbands())
-            poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
-            poller._clock.new_session()
-            node.device_online(machine.id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS, *PLANT_STATE_SPECS], [])
-            pollers.append((poller, plan))
+            pollers.append((poller, await begin_session(poller, node)))
 
         def publish(device_id: str, samples: Any) -> None:
             for message in node.device_data(device_id, samples):
