@@ -10,6 +10,7 @@ commands refuse the same thing in the same words.
 
 from __future__ import annotations
 
+import contextlib
 import grp
 import os
 import pwd
@@ -150,7 +151,10 @@ def state_dir_problem(path: Path) -> str | None:
     try:
         for directory in [*reversed(path.parents), path]:
             if not directory.exists():
-                directory.mkdir()
+                try:
+                    directory.mkdir()
+                except FileExistsError:
+                    continue  # made meanwhile by another process probing beside us (two gateways starting)
                 created.append(directory)
         if not path.is_dir():
             return f"state_dir: {path} is not a directory"
@@ -160,7 +164,8 @@ def state_dir_problem(path: Path) -> str | None:
         return f"state_dir: cannot create or write {path} ({exc.strerror})"
     finally:
         for directory in reversed(created):
-            directory.rmdir()
+            with contextlib.suppress(OSError):  # another process may be using it by now: then it stays
+                directory.rmdir()
     return None
 
 

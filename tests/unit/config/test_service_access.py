@@ -138,3 +138,15 @@ def test_a_running_service_holding_state_dir_is_fine_as_the_service_and_refused_
     assert "in use by the running focas-edge.service (PID 4242)" in notes[0]
     (problem,) = check_config.usability_problems(config, tmp_path / "edge.yaml", None)
     assert "(PID 4242, focas-edge.service;" in problem and "systemctl stop focas-edge" in problem
+
+
+def test_state_dir_made_meanwhile_by_another_gateway_is_no_problem(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two gateways starting at once probe the same parent: the one that finds it made between its look and
+    its mkdir must not refuse to start, and must not remove what it did not make."""
+    shared = tmp_path / "state"
+    shared.mkdir()
+    real_exists = Path.exists
+    monkeypatch.setattr(Path, "exists", lambda self: False if self == shared else real_exists(self))
+    assert state_dir_problem(shared / "hall-a") is None
+    assert real_exists(shared)
