@@ -26,6 +26,7 @@ from edge.config.listen_port import bind_problem
 from edge.config.service_access import current_account, owner_of, state_dir_problem, state_files_problem
 from edge.publish import Publisher, open_spool
 from edge.samples import MetricType, Sample
+from edge.service.blocking_pool import install_blocking_pool
 from edge.service.fd_limit import ensure_fd_limit, fds_needed
 from edge.service.gc_tuning import CollectorKeeper, tune_collector
 from edge.service.opcua_output import opcua_output
@@ -118,6 +119,7 @@ class Daemon:
 
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> int:
+        install_blocking_pool(asyncio.get_running_loop())
         self._install_signals()
         try:
             await self._start_status_http()

@@ -21,6 +21,7 @@ from typing import IO
 
 from edge.config import load_config
 from edge.samples import Sample
+from edge.service.blocking_pool import blocking_pool_threads
 from edge.service.daemon import Daemon
 
 REPORT_EVERY_S = float(os.environ.get("SOAK_REPORT_S", "5"))  # bench/outage.py asks for 0.5
@@ -57,7 +58,8 @@ async def report(daemon: Daemon, started: float) -> None:
     while True:
         counters = daemon.publisher.counters
         line = {"t": round(time.monotonic() - started, 1), "rss": rss_bytes(),
-                "fds": len(os.listdir("/proc/self/fd")), "threads": threading.active_count(),
+                "fds": len(os.listdir("/proc/self/fd")), "threads": threading.active_count() - blocking_pool_threads(),
+                "pool_threads": blocking_pool_threads(),
                 "tasks": len(asyncio.all_tasks()), "spool_rows": counters.get("spool_rows", 0),
                 "unconfirmed": counters.get("unconfirmed_batches", 0),
                 "suspect_dead": counters.get("suspect_dead", 0), "replayed_rows": counters.get("replayed_rows", 0),
