@@ -98,9 +98,9 @@ def measure(size: int) -> dict[str, Any]:
     page_best, page_median = _best_ms(lambda: render_machine(one, pollers[one], recorder.machine(one), NOW), 5)
     return {"machines": size, "record_us_per_batch": round(record_s / batches * 1e6, 2),
             "kb_per_machine": round(kept / size / 1024, 1),
-            "fleet_render_ms_best": round(fleet_best, 1), "fleet_render_ms_median": round(fleet_median, 1),
+            "fleet_render_ms_best": round(fleet_best, 3), "fleet_render_ms_median": round(fleet_median, 3),
             "fleet_html_kb": round(len(fleet_block(pollers, recorder, NOW).encode()) / 1024),
-            "machine_page_ms_best": round(page_best, 2), "machine_page_ms_median": round(page_median, 2)}
+            "machine_page_ms_best": round(page_best, 3), "machine_page_ms_median": round(page_median, 3)}
 
 
 def run(quick: bool = False, sizes: Sequence[int] | None = None) -> Result:
