@@ -198,10 +198,14 @@ class NativeServer:
 
     def reply(self, plans: Sequence[AnswerPlan], version: int) -> bytes:
         """The answer PDU now; forced EW codes are per subpacket, by command or name: the reference's job."""
-        if self.faults.ew:
-            answers = [answer_subpacket(self.state, plan.request, self.faults, self.context) for plan in plans]
-            return encode_response(answers, version)
-        return encode_planned_response(plans, version)
+        self.state.pin_moment()
+        try:
+            if self.faults.ew:
+                answers = [answer_subpacket(self.state, plan.request, self.faults, self.context) for plan in plans]
+                return encode_response(answers, version)
+            return encode_planned_response(plans, version)
+        finally:
+            self.state.unpin_moment()
 
     def _take_hang_on(self, plans: Sequence[AnswerPlan]) -> bool:
         """faults.take_hang_on for this request (skipped when no hang_on is set: it would change nothing)."""
