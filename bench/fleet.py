@@ -173,6 +173,8 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     sys_before = daemon.system_seconds()
     switches_before = daemon.context_switches()
     broker_before = _cpu(broker)
+    bench_process = psutil.Process()
+    subscriber_before = _cpu(bench_process)  # the subscriber's network thread; the main thread only samples RSS
     spy = None
     if options.spy_to is not None:
         spy = subprocess.Popen([options.py_spy, "record", "--pid", str(daemon.proc.pid), "--rate", "250",
@@ -189,6 +191,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     sys_cpu = daemon.system_seconds() - sys_before
     switches = daemon.context_switches() - switches_before
     sims_after = [sim.stats() for sim in sims]
+    subscriber_cpu = _cpu(bench_process) - subscriber_before
     subscriber.recording = False
     diagnosed = read_diagnosis(daemon, diagnosis) if diagnosis is not None else None
     rss.append(daemon.rss_bytes())
@@ -232,6 +235,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         "clock_reads_per_machine_min": clock_reads / options.machines / elapsed * 60,
         "sim_cores": sim_cpu / elapsed,
         "broker_cores": (_cpu(broker) - broker_before) / elapsed,
+        "subscriber_cores": subscriber_cpu / elapsed,
         "host_cpu_pct": system_cpu,
         "steal_pct": _steal_pct(host_before, host_after),
         "window_s": elapsed,
@@ -282,7 +286,8 @@ SUMMARY_KEYS = ("all_born_s", "cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_p
                 "cycles_per_s", "achieved_pct", "overruns", "change_p50_ms", "change_p99_ms", "sample_p50_ms",
                 "sample_p99_ms", "in_gateway_p99_ms", "to_subscriber_p99_ms", "stamp_err_p50_ms",
                 "stamp_abs_p99_ms", "stamp_abs_max_ms", "stamps_seen",
-                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "host_cpu_pct", "steal_pct", "fds",
+                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "subscriber_cores", "host_cpu_pct",
+                "steal_pct", "fds",
                 "values_per_cycle", "values_per_message")
 
 
