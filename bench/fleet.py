@@ -30,7 +30,9 @@ from bench.workload import CLOCK_MACRO, STAMP_MACRO, machines_section
 from tests.helpers import Mosquitto, mosquitto_binary
 
 GROUP = "bench"
-MACHINES_PER_SIM = 50
+MACHINES_PER_SIM = 50  # at least this many to a simulator process
+SIM_REQUESTS_PER_S = 250  # and as many more as keep a process at about this many requests a second
+MAX_MACHINES_PER_SIM = 200
 CPU_TARGET_US = 150.0
 RSS_TARGET_MB = 80.0
 LATENCY_SLACK_S = 0.020
@@ -92,7 +94,7 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}",
                                        f"Macro/{CLOCK_MACRO}")
         n = options.machines
-        sims = start_fleet_sims(n)
+        sims = start_fleet_sims(n, options.period_s)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, options.period_s, options.same_plan))
@@ -143,9 +145,15 @@ def dump_allocations(daemon: DaemonProcess, out: Path) -> None:
     time.sleep(0.5)  # the writer's last bytes
 
 
-def start_fleet_sims(machines: int) -> list[SimProcess]:
-    """The fleet's simulated CNCs, MACHINES_PER_SIM to a process (each stamps the latency macro)."""
-    parts = math.ceil(machines / MACHINES_PER_SIM)
+def start_fleet_sims(machines: int, period_s: float = 0.1) -> list[SimProcess]:
+    """The fleet's simulated CNCs, spread over processes (each stamps the latency macro).
+
+    A process takes MACHINES_PER_SIM machines, or at a slow period as many as make SIM_REQUESTS_PER_S (at most
+    MAX_MACHINES_PER_SIM): an idle simulator process wakes cold for every request, so twenty of them answering
+    50 requests a second each cost ~500 us of CPU per request where five answering 200 each cost ~370 us.
+    """
+    per_sim = max(MACHINES_PER_SIM, min(MAX_MACHINES_PER_SIM, round(SIM_REQUESTS_PER_S * period_s)))
+    parts = math.ceil(machines / per_sim)
     size = math.ceil(machines / parts)
     sims: list[SimProcess] = []
     try:

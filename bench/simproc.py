@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import gc
 import json
 import os
 import random
@@ -79,6 +80,8 @@ async def serve(args: argparse.Namespace) -> None:
              for _ in range(args.machines)]
     fleet = Fleet(specs, base_port=0, packed_base_port=0 if args.packed else None)
     await fleet.start()
+    gc.collect()
+    gc.freeze()  # the fleet lives as long as the process: collections need not walk it (~6 % of its CPU)
     stamper = None
     if args.stamp_macro:
         stamper = asyncio.create_task(stamp_changes(fleet, args.stamp_macro, args.stamp_min, args.stamp_max))
