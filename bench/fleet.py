@@ -103,10 +103,13 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to, options.tracemalloc_to,
                                diagnosis)
         born_s = wait_for_births(subscriber, daemon, n, started, workdir)
+        # Start-up: the daemon's CPU until the last birth, and how long its loop thread ran and waited for a CPU
+        born_cpu_s, (born_ran_s, born_waited_s) = daemon.cpu_seconds(), daemon.loop_schedstat()
         time.sleep(options.warmup_s)
         measured = _window(options, daemon, sims, subscriber, broker_process, diagnosis)
         measured["deaths"] = subscriber.deaths
         measured["all_born_s"] = born_s
+        measured.update(born_cpu_s=born_cpu_s, born_loop_ran_s=born_ran_s, born_loop_waited_s=born_waited_s)
         if options.tracemalloc_to is not None:
             dump_allocations(daemon, options.tracemalloc_to)
         return measured
@@ -290,7 +293,8 @@ def _cpu(process: psutil.Process | None) -> float:
     return float(times.user + times.system)
 
 
-SUMMARY_KEYS = ("all_born_s", "cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb",
+SUMMARY_KEYS = ("all_born_s", "born_cpu_s", "born_loop_ran_s", "born_loop_waited_s", "cpu_us_per_cycle",
+                "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb",
                 "cycles_per_s", "achieved_pct", "overruns", "change_p50_ms", "change_p99_ms", "sample_p50_ms",
                 "sample_p99_ms", "in_gateway_p99_ms", "to_subscriber_p99_ms", "stamp_err_p50_ms",
                 "stamp_abs_p99_ms", "stamp_abs_max_ms", "stamps_seen",
