@@ -30,7 +30,9 @@ from bench.workload import CLOCK_MACRO, STAMP_MACRO, machines_section
 from tests.helpers import Mosquitto, mosquitto_binary
 
 GROUP = "bench"
-MACHINES_PER_SIM = 50
+MACHINES_PER_SIM = 50  # at least this many to a simulator process
+SIM_REQUESTS_PER_S = 250  # and as many more as keep a process at about this many requests a second
+MAX_MACHINES_PER_SIM = 200
 CPU_TARGET_US = 150.0
 RSS_TARGET_MB = 80.0
 LATENCY_SLACK_S = 0.020
@@ -92,7 +94,7 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}",
                                        f"Macro/{CLOCK_MACRO}")
         n = options.machines
-        sims = start_fleet_sims(n)
+        sims = start_fleet_sims(n, options.period_s)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, options.period_s, options.same_plan))
@@ -101,10 +103,13 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to, options.tracemalloc_to,
                                diagnosis)
         born_s = wait_for_births(subscriber, daemon, n, started, workdir)
+        # Start-up: the daemon's CPU until the last birth, and how long its loop thread ran and waited for a CPU
+        born_cpu_s, (born_ran_s, born_waited_s) = daemon.cpu_seconds(), daemon.loop_schedstat()
         time.sleep(options.warmup_s)
         measured = _window(options, daemon, sims, subscriber, broker_process, diagnosis)
         measured["deaths"] = subscriber.deaths
         measured["all_born_s"] = born_s
+        measured.update(born_cpu_s=born_cpu_s, born_loop_ran_s=born_ran_s, born_loop_waited_s=born_waited_s)
         if options.tracemalloc_to is not None:
             dump_allocations(daemon, options.tracemalloc_to)
         return measured
@@ -143,9 +148,15 @@ def dump_allocations(daemon: DaemonProcess, out: Path) -> None:
     time.sleep(0.5)  # the writer's last bytes
 
 
-def start_fleet_sims(machines: int) -> list[SimProcess]:
-    """The fleet's simulated CNCs, MACHINES_PER_SIM to a process (each stamps the latency macro)."""
-    parts = math.ceil(machines / MACHINES_PER_SIM)
+def start_fleet_sims(machines: int, period_s: float = 0.1) -> list[SimProcess]:
+    """The fleet's simulated CNCs, spread over processes (each stamps the latency macro).
+
+    A process takes MACHINES_PER_SIM machines, or at a slow period as many as make SIM_REQUESTS_PER_S (at most
+    MAX_MACHINES_PER_SIM): an idle simulator process wakes cold for every request, so twenty of them answering
+    50 requests a second each cost ~500 us of CPU per request where five answering 200 each cost ~370 us.
+    """
+    per_sim = max(MACHINES_PER_SIM, min(MAX_MACHINES_PER_SIM, round(SIM_REQUESTS_PER_S * period_s)))
+    parts = math.ceil(machines / per_sim)
     size = math.ceil(machines / parts)
     sims: list[SimProcess] = []
     try:
@@ -173,6 +184,8 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     sys_before = daemon.system_seconds()
     switches_before = daemon.context_switches()
     broker_before = _cpu(broker)
+    bench_process = psutil.Process()
+    subscriber_before = _cpu(bench_process)  # the subscriber's network thread; the main thread only samples RSS
     spy = None
     if options.spy_to is not None:
         spy = subprocess.Popen([options.py_spy, "record", "--pid", str(daemon.proc.pid), "--rate", "250",
@@ -189,6 +202,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
     sys_cpu = daemon.system_seconds() - sys_before
     switches = daemon.context_switches() - switches_before
     sims_after = [sim.stats() for sim in sims]
+    subscriber_cpu = _cpu(bench_process) - subscriber_before
     subscriber.recording = False
     diagnosed = read_diagnosis(daemon, diagnosis) if diagnosis is not None else None
     rss.append(daemon.rss_bytes())
@@ -232,6 +246,7 @@ def _window(options: FleetOptions, daemon: DaemonProcess, sims: list[SimProcess]
         "clock_reads_per_machine_min": clock_reads / options.machines / elapsed * 60,
         "sim_cores": sim_cpu / elapsed,
         "broker_cores": (_cpu(broker) - broker_before) / elapsed,
+        "subscriber_cores": subscriber_cpu / elapsed,
         "host_cpu_pct": system_cpu,
         "steal_pct": _steal_pct(host_before, host_after),
         "window_s": elapsed,
@@ -278,11 +293,13 @@ def _cpu(process: psutil.Process | None) -> float:
     return float(times.user + times.system)
 
 
-SUMMARY_KEYS = ("all_born_s", "cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb",
+SUMMARY_KEYS = ("all_born_s", "born_cpu_s", "born_loop_ran_s", "born_loop_waited_s", "cpu_us_per_cycle",
+                "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb",
                 "cycles_per_s", "achieved_pct", "overruns", "change_p50_ms", "change_p99_ms", "sample_p50_ms",
                 "sample_p99_ms", "in_gateway_p99_ms", "to_subscriber_p99_ms", "stamp_err_p50_ms",
                 "stamp_abs_p99_ms", "stamp_abs_max_ms", "stamps_seen",
-                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "host_cpu_pct", "steal_pct", "fds",
+                "clock_reads_per_machine_min", "sim_cores", "broker_cores", "subscriber_cores", "host_cpu_pct",
+                "steal_pct", "fds",
                 "values_per_cycle", "values_per_message")
 
 

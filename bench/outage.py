@@ -141,7 +141,7 @@ def run_outage(machines: int, period_s: float, outage_s: float, after_s: float) 
         stack.callback(checker.close)
         relay = RelayThread(broker)
         stack.callback(relay.close)
-        sims = start_fleet_sims(machines)
+        sims = start_fleet_sims(machines, period_s)
         stack.callback(stop_sims, sims)
         ports = [port for sim in sims for port in sim.ports]
         config, keys = workdir / "edge.yaml", workdir / "collected.jsonl"

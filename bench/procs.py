@@ -103,6 +103,14 @@ class DaemonProcess:
         """Voluntary switches: each one is the process going to sleep and being woken again."""
         return int(self.process.num_ctx_switches().voluntary)
 
+    def loop_schedstat(self) -> tuple[float, float]:
+        """(ran, waited for a CPU) seconds of the daemon's main thread (its event loop) since it started."""
+        try:
+            ran, waited, _ = Path(f"/proc/{self.proc.pid}/task/{self.proc.pid}/schedstat").read_text().split()
+        except (OSError, ValueError):
+            return float("nan"), float("nan")
+        return int(ran) / 1e9, int(waited) / 1e9
+
     def rss_bytes(self) -> int:
         return int(self.process.memory_info().rss)
 

@@ -40,7 +40,7 @@ def run_reload(machines: int, period_s: float, watch_s: float) -> dict[str, Any]
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}",
                                        f"Macro/{CLOCK_MACRO}", track_seq=True)
         stack.callback(subscriber.close)
-        sims = start_fleet_sims(machines + 1)
+        sims = start_fleet_sims(machines + 1, period_s)
         stack.callback(stop_sims, sims)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import gc
 import json
 import os
 import random
@@ -39,8 +40,17 @@ def stamp_latency(value: float, received: float) -> float:
     return (received - value) % STAMP_MODULO
 
 
-async def stamp_changes(fleet: Fleet, macro: int, low: float, high: float) -> None:
-    """Every machine changes `macro` to the current time at random intervals in [low, high) seconds."""
+STAMP_TICK_S = 0.1  # how often the stamper looks for due changes: one wake-up per tick, not one per change
+
+
+async def stamp_changes(fleet: Fleet, macro: int, low: float, high: float, tick_s: float = STAMP_TICK_S) -> None:
+    """Every machine changes `macro` to the current time at random intervals in [low, high) seconds.
+
+    The stamper wakes on a fixed tick and writes every change that fell due since: a wake-up per change cost
+    a 50-machine process 0.013 cores (120 wake-ups a second), which a 1,000-machine run paid twenty times over.
+    A change's value is the clock when it is written, so the latency it measures keeps its meaning; only the
+    moments of change move by up to one tick.
+    """
     due = [time.time() + random.uniform(0, high) for _ in fleet]
     while True:
         now = time.time()
@@ -50,7 +60,7 @@ async def stamp_changes(fleet: Fleet, macro: int, low: float, high: float) -> No
                 due[index] = now + random.uniform(low, high)
                 if len(machine.state.write_log) > WRITE_LOG_LIMIT:
                     machine.state.write_log.clear()
-        await asyncio.sleep(max(0.001, min(due) - time.time()))
+        await asyncio.sleep(tick_s)
 
 
 def stats(fleet: Fleet) -> dict[str, float]:
@@ -70,6 +80,8 @@ async def serve(args: argparse.Namespace) -> None:
              for _ in range(args.machines)]
     fleet = Fleet(specs, base_port=0, packed_base_port=0 if args.packed else None)
     await fleet.start()
+    gc.collect()
+    gc.freeze()  # the fleet lives as long as the process: collections need not walk it (~6 % of its CPU)
     stamper = None
     if args.stamp_macro:
         stamper = asyncio.create_task(stamp_changes(fleet, args.stamp_macro, args.stamp_min, args.stamp_max))

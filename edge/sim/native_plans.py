@@ -42,6 +42,7 @@ _ZERO_SLOT = encode_scaled(0)  # the padding slot of a 30i-form record
 _BYTE_EXACT_PMC_TYPES = frozenset({PmcType.BYTE, PmcType.WORD, PmcType.LONG})
 SCALED_CACHE_LIMIT = 8192  # remembered scaled encodings (shared by every machine of the process)
 PLAN_CACHE_LIMIT = 512  # compiled read shapes per server; a collector polls a few dozen
+BODY_CACHE_LIMIT = 64  # whole read requests per server; a collector sends a handful of different ones
 
 AnswerSource = Callable[[], bytes]
 _scaled_known: dict[tuple[type, object], bytes] = {}
@@ -185,6 +186,11 @@ class AnswerPlan:
     request: RequestSubpacket
     answer: AnswerSource
 
+    @property
+    def kept(self) -> bool:
+        """Whether the plan is remembered for its bytes (reads are; writes carry extra bytes and are not)."""
+        return not self.request.extra
+
 
 def compile_plan(state: MachineState, request: RequestSubpacket, ctx: Context) -> AnswerPlan:
     """The plan answering `request` on `state` from now on (reads nothing but the profile yet)."""
@@ -204,6 +210,9 @@ class AnswerPlans:
     def __init__(self, state: MachineState) -> None:
         self.state = state
         self._plans: dict[bytes, AnswerPlan] = {}
+        # whole request bodies of kept plans: a collector sends the same few bodies every poll, and splitting
+        # one into its subpackets cost as much as answering three of them
+        self._bodies: dict[bytes, list[AnswerPlan]] = {}
         self._compiled_for: tuple[Profile, Context] | None = None
 
     def for_body(self, body: bytes, ctx: Context) -> list[AnswerPlan]:
@@ -211,7 +220,11 @@ class AnswerPlans:
         if self._compiled_for is None or self._compiled_for[0] is not self.state.profile \
                 or self._compiled_for[1] is not ctx:
             self._plans.clear()
+            self._bodies.clear()
             self._compiled_for = (self.state.profile, ctx)
+        known = self._bodies.get(body)
+        if known is not None:
+            return known
         plans = self._plans
         result = []
         for chunk in request_chunks(body):
@@ -219,12 +232,16 @@ class AnswerPlans:
             if plan is None:
                 plan = self._compile(chunk, ctx)
             result.append(plan)
+        if all(plan.kept for plan in result):
+            if len(self._bodies) >= BODY_CACHE_LIMIT:
+                self._bodies.clear()
+            self._bodies[body] = result
         return result
 
     def _compile(self, chunk: bytes, ctx: Context) -> AnswerPlan:
         request = decode_request_chunk(chunk)
         plan = compile_plan(self.state, request, ctx)
-        if not request.extra:
+        if plan.kept:
             if len(self._plans) >= PLAN_CACHE_LIMIT:
                 self._plans.clear()
             self._plans[chunk] = plan

@@ -13,15 +13,15 @@ ServerStats counts PDUs so tests can assert "ten items went as one request".
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from edge.focas.errors import ProtocolError
 from edge.focas.frame import (
+    Frame,
     FrameDecoder,
     PduType,
     encode_close_response,
@@ -38,7 +38,6 @@ CLOCK_COMMAND = READ_CLOCK.command
 
 log = logging.getLogger(__name__)
 
-READ_SIZE = 65536
 # The only published open reply is 360 bytes starting 00 08; what the rest means is unknown.
 OPEN_REPLY_PAYLOAD = b"\x00\x08" + bytes(358)
 
@@ -76,7 +75,7 @@ class NativeServer:
         self.context = Context.from_sysinfo(state.sysinfo())
         self.plans = AnswerPlans(state)
         self._server: asyncio.Server | None = None
-        self._sessions: set[asyncio.StreamWriter] = set()
+        self._sessions: set[asyncio.Transport] = set()
 
     @property
     def sessions(self) -> int:
@@ -85,7 +84,8 @@ class NativeServer:
 
     async def start(self) -> int:
         """Start listening; returns the bound port."""
-        self._server = await asyncio.start_server(self._serve, self.host, self.port)
+        loop = asyncio.get_running_loop()
+        self._server = await loop.create_server(self._session, self.host, self.port)
         self.port = int(self._server.sockets[0].getsockname()[1])
         log.info("native FOCAS serving machine=%s profile=%s port=%d", self.state.name,
                  self.state.profile.name, self.port)
@@ -102,8 +102,8 @@ class NativeServer:
     def drop_connections(self) -> int:
         """Abort every open session now (RST, no FIN handshake); returns how many."""
         dropped = list(self._sessions)
-        for writer in dropped:
-            writer.transport.abort()
+        for transport in dropped:
+            transport.abort()
         self._sessions.clear()
         return len(dropped)
 
@@ -115,60 +115,10 @@ class NativeServer:
         await self.close()
 
     # ---- one connection ----------------------------------------------------------------------------
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self.stats.connections += 1
-        limit = self.faults.max_sessions
-        if self.faults.take_refuse() or (limit is not None and len(self._sessions) >= limit):
-            self.stats.refused += 1
-            writer.transport.abort()
-            return
-        self._sessions.add(writer)
-        peer = writer.get_extra_info("peername")
-        try:
-            await self._converse(reader, writer)
-        except ProtocolError as exc:
-            log.warning("client sent a malformed frame machine=%s peer=%s error=%s",
-                        self.state.name, peer, exc)
-        except (ConnectionError, asyncio.IncompleteReadError):
-            pass
-        except asyncio.CancelledError:
-            # The simulator is shutting down. Ending cancelled would make asyncio's stream callback log
-            # a CancelledError traceback for a connection nobody is waiting on.
-            pass
-        finally:
-            self._sessions.discard(writer)
-            writer.close()
-        with contextlib.suppress(Exception, asyncio.CancelledError):
-            await writer.wait_closed()
+    def _session(self) -> _Session:
+        return _Session(self)
 
-    async def _converse(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        decoder = FrameDecoder()
-        version = self.state.profile.response_version
-        while data := await reader.read(READ_SIZE):
-            for frame in decoder.feed(data):
-                if self.faults.latency > 0:
-                    await asyncio.sleep(self.faults.latency)
-                if frame.type == PduType.OPEN_REQUEST:
-                    self.stats.open_pdus += 1
-                    writer.write(encode_open_response(OPEN_REPLY_PAYLOAD, version))
-                elif frame.type == PduType.CLOSE_REQUEST:
-                    self.stats.close_pdus += 1
-                    writer.write(encode_close_response(version))
-                    await writer.drain()
-                    return
-                elif frame.type == PduType.DATA_REQUEST:
-                    outcome = await self._answer_data(frame.body, writer, version)
-                    if outcome == "hang":
-                        await _stay_silent(reader)
-                    if outcome != "ok":
-                        return
-                else:
-                    log.warning("unsupported PDU type 0x%04x machine=%s; closing",
-                                frame.type, self.state.name)
-                    return
-            await writer.drain()
-
-    async def _answer_data(self, body: bytes, writer: asyncio.StreamWriter, version: int) -> str:
+    def _answer_data(self, body: bytes, transport: asyncio.WriteTransport, version: int) -> str:
         """Answer one data PDU: "ok", or "dropped" / "hang" when the conversation must end."""
         plans = self.plans.for_body(body, self.context)
         self.stats.data_pdus += 1
@@ -179,17 +129,16 @@ class NativeServer:
         if commands and all(command == CLOCK_COMMAND for command in commands):
             self.stats.clock_pdus += 1
         if self.faults.take_drop():
-            writer.transport.abort()
+            transport.abort()
             return "dropped"
         if self.faults.take_garbage():
-            writer.write(GARBAGE)
+            transport.write(GARBAGE)
             return "ok"
         reply = self.reply(plans, version)
         if self.faults.take_hang() or self._take_hang_on(plans):
-            writer.write(reply[: max(1, len(reply) // 2)])
-            await writer.drain()
+            transport.write(reply[: max(1, len(reply) // 2)])
             return "hang"
-        writer.write(reply)
+        transport.write(reply)
         return "ok"
 
     def answer_body(self, body: bytes, version: int) -> bytes:
@@ -198,10 +147,14 @@ class NativeServer:
 
     def reply(self, plans: Sequence[AnswerPlan], version: int) -> bytes:
         """The answer PDU now; forced EW codes are per subpacket, by command or name: the reference's job."""
-        if self.faults.ew:
-            answers = [answer_subpacket(self.state, plan.request, self.faults, self.context) for plan in plans]
-            return encode_response(answers, version)
-        return encode_planned_response(plans, version)
+        self.state.pin_moment()
+        try:
+            if self.faults.ew:
+                answers = [answer_subpacket(self.state, plan.request, self.faults, self.context) for plan in plans]
+                return encode_response(answers, version)
+            return encode_planned_response(plans, version)
+        finally:
+            self.state.unpin_moment()
 
     def _take_hang_on(self, plans: Sequence[AnswerPlan]) -> bool:
         """faults.take_hang_on for this request (skipped when no hang_on is set: it would change nothing)."""
@@ -210,7 +163,121 @@ class NativeServer:
         return self.faults.take_hang_on([(plan.command, plan.name) for plan in plans])
 
 
-async def _stay_silent(reader: asyncio.StreamReader) -> None:
-    """Hang: keep the socket open, read and ignore, say nothing until the peer gives up (no FIN from us)."""
-    while await reader.read(READ_SIZE):
-        pass
+class _Session(asyncio.Protocol):
+    """One client connection, answered in the transport's callbacks: no reader task, no future per read.
+
+    A frame is answered as soon as it is decoded; only a latency fault needs the loop's time, so while one
+    is set (or frames wait behind one) frames queue for a task that sleeps before each, in order. After a
+    hang the session reads and ignores everything until the peer gives up (no FIN from us).
+    """
+
+    def __init__(self, server: NativeServer) -> None:
+        self.server = server
+        self.decoder = FrameDecoder()
+        self.version = server.state.profile.response_version
+        self.transport: asyncio.Transport | None = None
+        self.peer: Any = None
+        self.silent = False  # after a hang: ignore the peer
+        self.over = False  # the conversation has ended (closed, dropped, refused, lost)
+        self.backlog: deque[Frame] | None = None  # frames waiting behind a latency fault
+        self.slow: asyncio.Task[None] | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        server = self.server
+        server.stats.connections += 1
+        limit = server.faults.max_sessions
+        if server.faults.take_refuse() or (limit is not None and len(server._sessions) >= limit):
+            server.stats.refused += 1
+            self.over = True
+            transport.abort()
+            return
+        self.transport = transport
+        self.peer = transport.get_extra_info("peername")
+        server._sessions.add(transport)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.over = True
+        if self.transport is not None:
+            self.server._sessions.discard(self.transport)
+        if self.slow is not None:
+            self.slow.cancel()
+
+    def pause_writing(self) -> None:  # the peer reads slower than we answer: stop reading (a stream's drain)
+        if self.transport is not None:
+            self.transport.pause_reading()
+
+    def resume_writing(self) -> None:
+        if self.transport is not None and not self.over:
+            self.transport.resume_reading()
+
+    def eof_received(self) -> bool | None:
+        return None  # the peer is done (or gave up on a hang): close our side
+
+    def data_received(self, data: bytes) -> None:
+        if self.over or self.silent:
+            return
+        try:
+            frames = self.decoder.feed(data)
+        except ProtocolError as exc:
+            log.warning("client sent a malformed frame machine=%s peer=%s error=%s",
+                        self.server.state.name, self.peer, exc)
+            self._end()
+            return
+        for frame in frames:
+            if self.backlog is not None or self.server.faults.latency > 0:
+                self._later(frame)
+            elif not self._answer(frame):
+                return
+
+    def _answer(self, frame: Frame) -> bool:
+        """Answer one frame now; False when the conversation is over."""
+        transport, server = self.transport, self.server
+        assert transport is not None
+        if frame.type == PduType.DATA_REQUEST:
+            outcome = server._answer_data(frame.body, transport, self.version)
+            if outcome == "hang":
+                self.silent = True
+            elif outcome != "ok":
+                self.over = True
+            return outcome == "ok"
+        if frame.type == PduType.OPEN_REQUEST:
+            server.stats.open_pdus += 1
+            transport.write(encode_open_response(OPEN_REPLY_PAYLOAD, self.version))
+            return True
+        if frame.type == PduType.CLOSE_REQUEST:
+            server.stats.close_pdus += 1
+            transport.write(encode_close_response(self.version))
+        else:
+            log.warning("unsupported PDU type 0x%04x machine=%s; closing", frame.type, server.state.name)
+        self._end()
+        return False
+
+    def _end(self) -> None:
+        """Close our side once what was written has gone out."""
+        self.over = True
+        if self.transport is not None:
+            self.transport.close()
+
+    def _later(self, frame: Frame) -> None:
+        if self.backlog is None:
+            self.backlog = deque()
+            self.slow = asyncio.get_running_loop().create_task(self._answer_slowly())
+        self.backlog.append(frame)
+
+    async def _answer_slowly(self) -> None:
+        """Frames behind a latency fault, in order, each after the latency set when it comes up."""
+        backlog = self.backlog
+        assert backlog is not None
+        try:
+            while backlog and not self.over and not self.silent:
+                latency = self.server.faults.latency
+                if latency > 0:
+                    await asyncio.sleep(latency)
+                if self.over or self.silent or not self._answer(backlog.popleft()):
+                    break
+        except asyncio.CancelledError:
+            pass  # the connection went, or the simulator is shutting down
+        finally:
+            self.backlog = None
+            self.slow = None

@@ -112,6 +112,7 @@ class MachineState:
         self._program = Program(self._profile, self._cycle, path)
         self._motion = Motion(self._profile, self._cycle, seed)
         self.param_write_enabled = False
+        self._moment: float | None = None  # while set (pin_moment), the instant the cycle is read at
         # A test hook: this macro reads as the CNC's own clock at the moment it answers (clock_macro_value),
         # so a subscriber can compare a published source timestamp with the clock it claims to be.
         self.clock_macro: int | None = None
@@ -160,10 +161,23 @@ class MachineState:
         """Gateway (real) time, seconds since the epoch, from the injected clock."""
         return self._time()
 
+    def pin_moment(self) -> None:
+        """Read the cycle at this one instant until unpin_moment: a server answering one request pins it, so
+        the request's dozen reads replay the cycle once, not once each (the answer is the state of one moment,
+        as a CNC gives it). Writes and the CNC clock keep reading the injected clock."""
+        now = self._time()
+        for state in self._paths.values():
+            state._moment = now
+
+    def unpin_moment(self) -> None:
+        for state in self._paths.values():
+            state._moment = None
+
     def advance(self, now: float | None = None) -> None:
-        """Replay the cycle up to `now` (default: the injected clock): parts, alarms raised and cleared."""
+        """Replay the cycle up to `now` (default: the pinned moment, else the injected clock): parts, alarms
+        raised and cleared."""
         with self._lock:
-            real = self._time() if now is None else now
+            real = (self._time() if self._moment is None else self._moment) if now is None else now
             if self._held_at is not None:  # held: the cycle stands where feed hold stopped it
                 real = min(real, self._held_at)
             target = real - self._t0 - self._held_s + self._phase

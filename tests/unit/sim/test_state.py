@@ -90,3 +90,16 @@ def test_a_cycle_alarm_after_a_feed_hold_is_stamped_with_its_real_instant() -> N
     [event, *_] = state.alarm_events()
     assert len(state.alarm_history()) == before + 1
     assert abs(event.utc_time.timestamp() - (clock.now - 0.1)) < 1e-3
+
+
+def test_a_pinned_moment_holds_the_cycle_of_every_path_until_unpinned() -> None:
+    state, clock = machine("31i-2p")
+    second = state.for_path(2)
+    assert second is not None
+    clock.tick(3.0)
+    state.pin_moment()
+    pinned = state.positions("absolute"), second.positions("absolute")
+    clock.tick(0.5)  # a request's reads all see the moment it was pinned at
+    assert (state.positions("absolute"), second.positions("absolute")) == pinned
+    state.unpin_moment()
+    assert (state.positions("absolute"), second.positions("absolute")) != pinned
