@@ -330,8 +330,7 @@ class SparkplugNode:
 
     def _grown(self, device_key: str, old: DeviceTable | None, layout: MetricLayout) -> DeviceTable:
         """A table for `layout` (aliases assigned to its new names), keeping `old`'s last values and state."""
-        alias_of = self._aliases.alias
-        table = DeviceTable(layout, [alias_of(device_key, name) for name in layout.names])
+        table = DeviceTable(layout, self._aliases.aliases(device_key, layout.names))
         if old is not None:
             table.record([s for s in old.last_samples() if s.name in layout.slots])
             table.online, table.not_good, table.data_topic = old.online, old.not_good, old.data_topic
