@@ -21,7 +21,7 @@ from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import notify_all
+from edge.opcua.subscriptions import GatewayMonitoredItems, notify_all
 from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
 from edge.samples import MetricSpec, MetricType, Sample
 
@@ -207,10 +207,12 @@ class GatewaySpace:
             value = data_value(sample, now)
             for attribute in slot.attributes:
                 attribute.value = value
-                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
-                    others = notify_all(attribute.datachange_callbacks, value)
-                    if others:
-                        slow = _pending(slow, others, value)
+                callbacks = attribute.datachange_callbacks
+                if callbacks:  # monitored: the gateway's items take it synchronously (notify_all, inlined)
+                    for handle, callback in callbacks.items():
+                        owner = getattr(callback, "__self__", None)
+                        if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+                            slow = _pending(slow, ((handle, callback),), value)
             count += 1
         self.values_set += count
         return slow
