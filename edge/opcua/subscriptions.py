@@ -29,7 +29,7 @@ from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.monitored_item_service import MonitoredItemService
 from asyncua.server.subscription_service import SubscriptionService
 
-from edge.opcua.encoding import data_change_notification
+from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
 from edge.opcua.values import SharedDataValue
 
 _DISABLED = ua.MonitoringMode.Disabled
@@ -43,7 +43,7 @@ class GatewayMonitoredItems(MonitoredItemService):
         # callback handle -> (monitored item id, item), resolved on the item's first change: one lookup
         # per change instead of two. asyncua never reuses a handle, and a deleted item's callback is gone
         # from its attribute, so an entry is never stale when it is used; it is dropped with the item.
-        self._resolved: dict[int, tuple[int, Any]] = {}
+        self._resolved: dict[int, tuple[int, Any, bytes]] = {}  # + the item's encoded client handle
 
     def notify(self, handle: int, value: ua.DataValue) -> bool:
         """Queue the change for the item behind `handle`; False when the item needs asyncua's path.
@@ -55,8 +55,8 @@ class GatewayMonitoredItems(MonitoredItemService):
             item = self._monitored_items.get(mid) if mid is not None else None
             if item is None:
                 return True
-            resolved = self._resolved[handle] = (mid, item)
-        mid, item = resolved
+            resolved = self._resolved[handle] = (mid, item, handle_prefix(item.client_handle))
+        mid, item, prefix = resolved
         if item.mode == _DISABLED:
             return True
         subscription = self.isub
@@ -68,14 +68,17 @@ class GatewayMonitoredItems(MonitoredItemService):
         if previous is not None and (previous is value or (previous.StatusCode == value.StatusCode
                                                              and previous.Value == value.Value)):
             return True  # asyncua's default trigger (StatusValue): nothing a client sees has changed
+        # a client's subscription queues the notification's bytes; the server's own ones read objects
+        note: Any = prefix + data_value_bytes(value) if subscription.pub_request_callback is not None \
+            else (item.client_handle, value)
         queue = subscription._triggered_datachanges
         pending = queue.get(mid)
         if pending is None:
-            queue[mid] = [(item.client_handle, value)]
+            queue[mid] = [note]
             return True
         if item.queue_size and len(pending) >= item.queue_size:
             del pending[0]  # asyncua's choice whatever DiscardOldest says: the oldest goes
-        pending.append((item.client_handle, value))
+        pending.append(note)
         return True
 
     def _delete_monitored_items(self, mid: int) -> ua.StatusCode:
@@ -100,19 +103,20 @@ class GatewaySubscription(InternalSubscription):
         queued: dict[int, list[Any]] = self._triggered_datachanges
         if not queued:
             return
-        changes = [_pair(note) for notes in queued.values() for note in notes]
-        queued.clear()
         notification: Any
         if self.pub_request_callback is None:  # one of the server's own: its callback reads the objects
             notification = ua.DataChangeNotification(MonitoredItems=[
-                ua.MonitoredItemNotification(ClientHandle=handle, Value=value) for handle, value in changes])
+                ua.MonitoredItemNotification(ClientHandle=handle, Value=value)
+                for notes in queued.values() for handle, value in map(_pair, notes)])
         else:
-            notification = data_change_notification(changes)
+            notification = data_change_of_notes(queued.values())
+        queued.clear()
         result.NotificationMessage.NotificationData.append(notification)
 
 
 def _pair(note: Any) -> tuple[int, ua.DataValue]:
-    """(client handle, value) of a queued change: ours are pairs, asyncua's MonitoredItemNotifications."""
+    """(client handle, value) of a change queued for one of the server's own subscriptions: ours are pairs,
+    asyncua's MonitoredItemNotifications."""
     if isinstance(note, tuple):
         return note
     return note.ClientHandle, note.Value
