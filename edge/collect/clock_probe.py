@@ -15,7 +15,9 @@ request, no data) timed by the tracker:
   the gateway is busy with births, round trips are long and narrowing stops at ±100-250 ms; without the
   second rule it would stay there for half an hour (drift widens the interval by 0.1 ms a second), and so
   would the stamps' error (issue 25). A restart that does not help stops again at the new round trip, so
-  it costs two reads per halving of the round trip, not a steady rate.
+  it costs two reads per halving of the round trip, not a steady rate. Nor is a narrowing read sent while
+  the usual half round trip is not well below the uncertainty (NARROWED): it could not narrow, and the
+  budget it would spend (the burst) is what the reads after the busy start need.
 - **Ageing.** The tracker widens old readings by the assumed drift (MAX_DRIFT_RATE), so the interval
   grows slowly and one more narrowing read is due every minute or so.
 - **Verifying.** Every VERIFY_EVERY_S one read just before (then, next time, just after) the predicted
@@ -114,7 +116,7 @@ class ClockProbes:
               and self._usual <= REOPEN_SHARE * self._rested_usual):
             self._fruitless = 0  # round trips are quicker than the ones narrowing rested on: try again
         self._before = uncertainty
-        if uncertainty > self.goal_s and self._fruitless < FRUITLESS_LIMIT:
+        if uncertainty > self.goal_s and self._fruitless < FRUITLESS_LIMIT and self._usual < uncertainty * NARROWED:
             self._kind, earliest, aim = ProbeKind.NARROW, now, 0.0
         else:
             verified = now if self._verified is None else self._verified

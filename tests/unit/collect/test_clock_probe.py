@@ -228,3 +228,18 @@ def test_round_trips_that_stay_long_do_not_restart_narrowing_over_and_over() -> 
     machine = VirtualMachine(Cnc(0.0), 1.0, rtt=0.2)
     machine.run_until(1200.0)
     assert machine.reads_between(60.0, 1200.0) / 19 <= 3.0
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_busy_start_does_not_spend_the_burst_the_quick_round_trips_need(seed: int) -> None:
+    """Round trips of 20-400 ms for 30 s (births), then 3 ms. Reads whose round trip is as long as the
+    uncertainty cannot narrow it, so they wait: the burst is left for the quick round trips, which take the
+    offset to the goal within seconds instead of one read per 15 s of the sustained budget."""
+    rng = random.Random(seed)
+    machine = VirtualMachine(Cnc(0.0), 1.0, seed=seed, phase=rng.random())
+    for second in range(30):
+        machine.rtt = rng.uniform(0.02, 0.4)
+        machine.run_until(second + 1.0)
+    machine.rtt = 0.003
+    machine.run_until(35.0)
+    assert machine.tracker.synchronised_at(machine.now)
