@@ -268,7 +268,20 @@ def diagnosis_line(d: dict[str, Any]) -> str:
             f"(gen2 {d['gc']['gen2']['n']}), {d['gc_tracked_objects']} tracked, {d['gc_frozen_objects']} frozen; "
             f"machines per slot {slots.get('min')}..{slots.get('max')} (mean {slots.get('mean', 0):.1f}); "
             f"stamp->outputs p50/p99 {d['stamp_to_outputs'].get('p50_ms', 0):.0f}/"
-            f"{d['stamp_to_outputs'].get('p99_ms', 0):.0f} ms; tick p99 {d['tick'].get('p99_ms', 0):.0f} ms")
+            f"{d['stamp_to_outputs'].get('p99_ms', 0):.0f} ms; tick p99 {d['tick'].get('p99_ms', 0):.0f} ms"
+            + clock_line(d.get("clock", {})))
+
+
+def clock_line(c: dict[str, Any]) -> str:
+    """The clock offset's share of the stamp error (bench.latency_daemon): per tick and per machine."""
+    if not c:
+        return ""
+    tick, machine, unc = c["tick_offset_error_abs"], c["machine_offset_error_abs"], c["machine_uncertainty"]
+    return (f"; clock offset error p50/p99/max per tick {tick.get('p50_ms', 0):.1f}/{tick.get('p99_ms', 0):.1f}/"
+            f"{tick.get('max_ms', 0):.0f} ms, per machine p99 {machine.get('p99_ms', 0):.1f} ms; uncertainty "
+            f"p50/p99/max {unc.get('p50_ms', 0):.1f}/{unc.get('p99_ms', 0):.1f}/{unc.get('max_ms', 0):.0f} ms; "
+            f"clock-only reads per machine {c['probes_sent_per_machine']['mean']:.1f} (max "
+            f"{c['probes_sent_per_machine']['max']:.0f})")
 
 
 def read_diagnosis(daemon: DaemonProcess, out: Path) -> dict[str, Any]:

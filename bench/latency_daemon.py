@@ -46,6 +46,7 @@ class Window:
     """What the probes saw since the last reset."""
 
     def __init__(self) -> None:
+        self.daemon: Daemon | None = None  # its pollers' clocks, at report time
         self.reset()
 
     def reset(self) -> None:
@@ -58,6 +59,7 @@ class Window:
         self.slot_sizes: Counter[int] = Counter()
         self.tick: list[float] = []  # request sent -> the tick's changes handed to the outputs
         self.publish_lag: list[float] = []  # CNC stamp -> the outputs have the changes (gateway wall clock)
+        self.offset_error: list[float] = []  # per tick: the clock offset in use minus the true one (same host)
 
     def report(self) -> dict[str, Any]:
         gc_all = [d for durations in self.gc.values() for d in durations]
@@ -76,7 +78,31 @@ class Window:
             "machines_per_slot": _spread(self.slot_sizes),
             "tick": _quantiles(self.tick),
             "stamp_to_outputs": _quantiles(self.publish_lag),
+            "clock": _clock_figures(self),
         }
+
+
+def _true_offset() -> float:
+    """The simulators' CNC clock (offset 0: real time) minus this host's monotonic clock."""
+    return time.time() - time.monotonic()
+
+
+def _clock_figures(window: Window) -> dict[str, Any]:
+    """Whether stamp error is the clock offset: its error per tick, and each machine's offset state now."""
+    pollers = list(window.daemon.pollers.values()) if window.daemon is not None else []
+    now, truth = time.monotonic(), _true_offset()
+    errors, uncertainties, probes = [], [], []
+    for poller in pollers:
+        tracker = poller.clock
+        if tracker.offset_s is None:
+            continue
+        errors.append(abs(tracker.offset_s - truth))
+        uncertainties.append(tracker.uncertainty_at(now) or 0.0)
+        probes.append(float(poller._clock.probes.sent))
+    return {"tick_offset_error_abs": _quantiles([abs(e) for e in window.offset_error]),
+            "machine_offset_error_abs": _quantiles(errors), "machine_uncertainty": _quantiles(uncertainties),
+            "probes_sent_per_machine": {"mean": sum(probes) / len(probes) if probes else 0.0,
+                                        "max": max(probes, default=0.0)}}
 
 
 def _schedstat() -> tuple[float, float]:
@@ -126,6 +152,7 @@ def watch_grid(window: Window, grid: TickGrid) -> None:
 
 def install(window: Window, daemon: Daemon) -> None:
     """The probes: gc callbacks, the tick grid's timers, the tick, the outputs, a loop-lag timer."""
+    window.daemon = daemon
     watch_collector(window)
     watch_grid(window, daemon.tick_grid)
     outputs_data = daemon.outputs.device_data
@@ -142,6 +169,9 @@ def install(window: Window, daemon: Daemon) -> None:
         started = time.monotonic()
         result = await tick(self, plan, groups)
         window.tick.append(time.monotonic() - started)
+        offset = self.clock.offset_s
+        if offset is not None and not self.clock.use_gateway_time:
+            window.offset_error.append(offset - _true_offset())
         return result
 
     poller_module.MachinePoller._tick = timed_tick  # type: ignore[method-assign]

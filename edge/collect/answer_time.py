@@ -39,6 +39,11 @@ class AnswerTime:
         self._floor = floor + (rtt_s - floor) * RISE
         return floor / 2
 
+    @property
+    def usual_s(self) -> float:
+        """The machine's usual round trip (inf before the first): the clock probes compare it over time."""
+        return self._floor
+
     def reset(self) -> None:
         """A new session (another route, maybe another CNC): its round trips start afresh."""
         self._floor = float("inf")

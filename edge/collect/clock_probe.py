@@ -10,7 +10,14 @@ request, no data) timed by the tracker:
   middle of the offset interval says the CNC second flips. The CNC shows either the new second (θ is in
   the upper half) or the old one (the lower half): each read halves the interval, so about seven take a
   fresh machine from ±500 ms to ±5 ms. They stop when two reads in a row no longer narrow it (the round
-  trip is the limit then) and start again when the interval has grown to twice what they left.
+  trip is the limit then) and start again when the interval has grown to twice what they left, or when the
+  machine's usual round trip has fallen to half what it was when they stopped: at a big fleet's start-up
+  the gateway is busy with births, round trips are long and narrowing stops at ±100-250 ms; without the
+  second rule it would stay there for half an hour (drift widens the interval by 0.1 ms a second), and so
+  would the stamps' error (issue 25). A restart that does not help stops again at the new round trip, so
+  it costs two reads per halving of the round trip, not a steady rate. Nor is a narrowing read sent while
+  the usual half round trip is not well below the uncertainty (NARROWED): it could not narrow, and the
+  budget it would spend (the burst) is what the reads after the busy start need.
 - **Ageing.** The tracker widens old readings by the assumed drift (MAX_DRIFT_RATE), so the interval
   grows slowly and one more narrowing read is due every minute or so.
 - **Verifying.** Every VERIFY_EVERY_S one read just before (then, next time, just after) the predicted
@@ -40,6 +47,7 @@ PER_MINUTE = 4.0  # and sustained
 LEAD_S = 0.002  # a read is planned at least this far ahead of now (the event loop's timer granularity)
 NARROWED = 0.75  # a narrowing read that leaves more than this share of the uncertainty did not help
 FRUITLESS_LIMIT = 2  # unhelpful narrowing reads in a row before narrowing rests
+REOPEN_SHARE = 0.5  # narrowing resumes when the usual round trip falls to this share of the one it rested at
 REPLAN_S = 1.0  # a plan is recomputed at least this often (the uncertainty grows as readings age)
 MIDNIGHT_GUARD_S = 2  # seconds either side of the CNC's midnight with no read
 
@@ -63,6 +71,8 @@ class ClockProbes:
         self._tokens = float(burst)
         self._tokens_at: float | None = None
         self._fruitless = 0
+        self._usual = math.inf  # half the machine's usual round trip, as the poller last said
+        self._rested_usual = math.inf  # and as it was when narrowing rested
         self._settled = math.inf  # the uncertainty the last read left
         self._verified: float | None = None  # when the last verifying read was done (None: none yet)
         self._side = -1.0  # the side of the flip the next verifying read takes (-1: before it)
@@ -73,9 +83,14 @@ class ClockProbes:
         self._revision = -1
 
     # ---- planning ------------------------------------------------------------------------------------
-    def send_at(self, now: float, half_rtt_s: float = 0.0) -> float:
+    def send_at(self, now: float, half_rtt_s: float = 0.0, usual_half_rtt_s: float | None = None) -> float:
         """Monotonic time to send the next clock-only read (math.inf: none wanted), so that the middle of
-        its round trip falls on the moment planned. Cheap when nothing changed: the poller asks every tick."""
+        its round trip falls on the moment planned. Cheap when nothing changed: the poller asks every tick.
+
+        `usual_half_rtt_s` (half the machine's usual round trip, edge.collect.answer_time; the last one when
+        not given) says when narrowing that rested on a long round trip may help again."""
+        usual = half_rtt_s if usual_half_rtt_s is None else usual_half_rtt_s
+        self._usual = usual  # the plan is remade at least every REPLAN_S, which sees it
         revision = self.tracker.revision
         if revision == self._revision and now < self._valid_until:
             return self._send
@@ -97,8 +112,11 @@ class ClockProbes:
             return math.inf  # no CNC time in use: nothing to refine
         if uncertainty > 2 * self._settled:
             self._fruitless = 0  # the interval grew (readings aged out, a re-sync): narrowing helps again
+        elif (self._fruitless >= FRUITLESS_LIMIT and uncertainty > self.goal_s
+              and self._usual <= REOPEN_SHARE * self._rested_usual):
+            self._fruitless = 0  # round trips are quicker than the ones narrowing rested on: try again
         self._before = uncertainty
-        if uncertainty > self.goal_s and self._fruitless < FRUITLESS_LIMIT:
+        if uncertainty > self.goal_s and self._fruitless < FRUITLESS_LIMIT and self._usual < uncertainty * NARROWED:
             self._kind, earliest, aim = ProbeKind.NARROW, now, 0.0
         else:
             verified = now if self._verified is None else self._verified
@@ -147,6 +165,8 @@ class ClockProbes:
             self._fruitless = 0
         else:
             self._fruitless += 1
+            if self._fruitless == FRUITLESS_LIMIT:
+                self._rested_usual = self._usual  # narrowing rests: resume when round trips halve
         if self._verified is None:
             self._verified = now  # verifying starts VERIFY_EVERY_S after the first read
         self._settled = after if after is not None else math.inf

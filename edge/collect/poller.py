@@ -505,7 +505,7 @@ class MachinePoller:
         when it did. Its time is exact (its own timer, not the shared tick grid); its values wait for the
         next tick, whose stamps it improved."""
         half_rtt = self.stats.last_cycle_s / 2
-        send_at = self._clock.probes.send_at(time.monotonic(), half_rtt)
+        send_at = self._clock.probes.send_at(time.monotonic(), half_rtt, self._answer_time.usual_s / 2)
         if send_at >= self._grid.slot_time(next_due):
             return False
         delay = send_at - time.monotonic()

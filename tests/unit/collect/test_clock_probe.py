@@ -205,3 +205,41 @@ def test_no_reads_while_gateway_time_is_used() -> None:
     machine.run_until(60.0)
     assert machine.tracker.use_gateway_time and not machine.reads
     assert not any(s.synchronised for s in machine.stamps)
+
+
+@pytest.mark.parametrize("slow_rtt", [0.1, 0.2, 0.3])
+def test_narrowing_resumes_when_round_trips_become_quick_after_a_busy_start(slow_rtt: float) -> None:
+    """Issue 25: at a big fleet's start-up the gateway is busy with births and round trips are long, so
+    narrowing rests at a wide limit. Once round trips are quick again it must resume (drift alone would
+    take half an hour to reopen it), and stay cheap."""
+    machine = VirtualMachine(Cnc(0.0), 1.0, rtt=slow_rtt)
+    machine.run_until(30.0)
+    rested = machine.tracker.uncertainty_at(machine.now)
+    assert rested is not None and rested > SYNC_TARGET_S, "the busy start did not leave a wide interval"
+    machine.rtt = 0.003
+    machine.run_until(180.0)
+    later = [s for s in machine.stamps if s.mono > 60.0]
+    assert later and all(s.synchronised and abs(s.error_s) <= SYNC_TARGET_S for s in later)
+    assert machine.reads_between(30.0, 180.0) <= BURST, "resuming should take a few reads, not a steady rate"
+
+
+def test_round_trips_that_stay_long_do_not_restart_narrowing_over_and_over() -> None:
+    """A machine whose round trip really is long: narrowing rests once and the reads stay at the steady rate."""
+    machine = VirtualMachine(Cnc(0.0), 1.0, rtt=0.2)
+    machine.run_until(1200.0)
+    assert machine.reads_between(60.0, 1200.0) / 19 <= 3.0
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_busy_start_does_not_spend_the_burst_the_quick_round_trips_need(seed: int) -> None:
+    """Round trips of 20-400 ms for 30 s (births), then 3 ms. Reads whose round trip is as long as the
+    uncertainty cannot narrow it, so they wait: the burst is left for the quick round trips, which take the
+    offset to the goal within seconds instead of one read per 15 s of the sustained budget."""
+    rng = random.Random(seed)
+    machine = VirtualMachine(Cnc(0.0), 1.0, seed=seed, phase=rng.random())
+    for second in range(30):
+        machine.rtt = rng.uniform(0.02, 0.4)
+        machine.run_until(second + 1.0)
+    machine.rtt = 0.003
+    machine.run_until(35.0)
+    assert machine.tracker.synchronised_at(machine.now)
