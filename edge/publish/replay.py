@@ -19,6 +19,7 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Sequence
+from operator import attrgetter
 from typing import Any, Protocol
 
 from edge.publish.holding import Format, ReplaySpool, Spool
@@ -30,6 +31,7 @@ from edge.publish.tasks import BackgroundTasks
 from edge.samples import Sample
 
 log = logging.getLogger(__name__)
+_historical_of = attrgetter("historical")
 
 FETCH_S = 0.1  # a replay step fetches (and confirms with one barrier) about this many seconds of rows
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work, not after each chunk
@@ -131,6 +133,8 @@ class Replayer:
                 if not target.replay_accepts(entry.device_id):
                     continue  # went offline since the query: its rows wait for its next DBIRTH
                 done.append(entry.id)
+                if delivered is not None and delivered.has_row(entry.id):
+                    continue  # an earlier replay sent it: proven, or to be proven by this step's barrier
                 samples = delivered.fresh(entry.device_id, entry.samples) if delivered is not None \
                     else entry.samples
                 messages = self._historical_messages(entry, samples)
@@ -142,7 +146,7 @@ class Replayer:
                         return
                     self._counters["replayed_messages"] += 1
                 if delivered is not None and messages:
-                    delivered.record(entry.device_id, samples)
+                    delivered.record_row(entry.id)
                 paced += 1
                 if paced % chunk == 0:  # yield to live ticks, holding the rate
                     await pacer.pace(paced)
@@ -154,7 +158,7 @@ class Replayer:
                 acked = set(done)
                 for entry in entries:
                     if entry.id in acked:
-                        delivered.discard(entry.device_id, entry.samples)
+                        delivered.discard(entry.device_id, entry.samples, entry.id)
             self._counters["replayed_rows"] += len(done)
             sent_rows += len(done)
         left = spool.pending(fmt)
@@ -175,7 +179,8 @@ class Replayer:
     def _historical_messages(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
         if not samples:
             return []
-        samples = [s if s.historical else _as_historical(s) for s in samples]
+        if not all(map(_historical_of, samples)):  # the spool hands them out historical already
+            samples = [s if s.historical else _as_historical(s) for s in samples]
         return self._target.historical(entry, samples)
 
 

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Literal
 
 from edge.publish.spool_disk import DiskBudget, Headroom, disk_budget, filesystem_bytes, is_full
-from edge.samples import MetricType, Quality, Sample
+from edge.samples import SAMPLE_SLOT_SETTERS, MetricType, Quality, Sample
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +74,8 @@ class _Unsaved:
 
 @dataclass(frozen=True, slots=True)
 class SpoolEntry:
-    """One held batch: what `hold` was given, with its row id (the replay order and the ack key)."""
+    """One held batch: what `hold` was given, marked historical (it is replayed as such), with its row id
+    (the replay order and the ack key)."""
 
     id: int
     fmt: Format
@@ -95,16 +96,32 @@ _TYPES: dict[object, MetricType] = {t.value: t for t in MetricType}
 _QUALITIES: dict[object, Quality] = {int(q): q for q in Quality}
 
 
-def decode_samples(body: bytes) -> list[Sample]:
-    """The inverse of encode_samples; ValueError (with what came) for a body that is not one."""
+def decode_samples(body: bytes, historical: bool = False) -> list[Sample]:
+    """The inverse of encode_samples, the samples marked `historical` (what the replay sends); ValueError
+    (with what came) for a body that is not one.
+
+    Built slot by slot (edge.samples.SAMPLE_SLOT_SETTERS): a frozen dataclass's __init__ is twice the cost,
+    and a 1,000-machine backlog is 150,000 samples a second to decode."""
     try:
-        rows = json.loads(body)
-        return [Sample(str(name), value, _TYPES.get(kind) or MetricType(kind), int(ts),
-                       _QUALITIES.get(quality) or Quality(int(quality)))
-                for name, value, kind, ts, quality in rows]
+        out: list[Sample] = []
+        append = out.append
+        for name, value, kind, ts, quality in json.loads(body):
+            sample = _new(Sample)
+            _set_name(sample, name if type(name) is str else str(name))
+            _set_value(sample, value)
+            _set_type(sample, _TYPES.get(kind) or MetricType(kind))
+            _set_timestamp(sample, ts if type(ts) is int else int(ts))
+            _set_quality(sample, _QUALITIES.get(quality) or Quality(int(quality)))
+            _set_historical(sample, historical)
+            append(sample)
+        return out
     except (TypeError, ValueError, UnicodeDecodeError) as exc:
         raise ValueError(f"spool row: expected a JSON list of [name, value, type, ts, quality], "
                          f"got {body[:60]!r}: {exc}") from exc
+
+
+_new = object.__new__
+_set_name, _set_value, _set_type, _set_timestamp, _set_quality, _set_historical = SAMPLE_SLOT_SETTERS
 
 
 class DiskSpool:
@@ -273,7 +290,7 @@ class DiskSpool:
                 if row_id in self._acked or len(out) >= limit:
                     continue
                 try:
-                    samples = decode_samples(bytes(body))
+                    samples = decode_samples(bytes(body), historical=True)
                 except ValueError as exc:
                     log.error("unreadable spool row deleted id=%d error=%s", row_id, exc)
                     self._delete(db, [row_id])

@@ -95,6 +95,30 @@ def test_device_data_bytes_equal_the_runtime_encoding(batches: list[list[Sample]
         assert n.encode_errors == errors
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.lists(samples, max_size=8)), min_size=1, max_size=6))
+def test_historical_data_bytes_equal_the_runtime_encoding(batches: list[tuple[bool, list[Sample]]]) -> None:
+    """Replayed batches (their own loop in the node) between live ones: every metric is_historical, and the
+    live quality bookkeeping is what the live batches alone make it."""
+    n = make_node()
+    n.births()
+    n.device_online("m1", [MetricSpec(name, TYPE_OF[name]) for name in NAMES], [])
+    aliases = {name: n._aliases.alias("m1", name) for name in NAMES}
+    not_good: set[str] = set()
+    for replayed, batch in batches:
+        out = n.historical_data("m1", batch) if replayed else n.device_data("m1", batch)
+        if not batch:
+            assert out == []
+            continue
+        seq = Payload.FromString(out[0].payload).seq
+        if replayed:
+            marked = [Sample(s.name, s.value, s.type, s.timestamp_ms, s.quality, True) for s in batch]
+            expected, _ = reference(seq, aliases, marked, set(not_good))
+        else:
+            expected, _ = reference(seq, aliases, batch, not_good)
+        assert out[0].payload == expected
+
+
 @given(st.one_of(st.integers(0, 2**64 - 1), st.integers(2**35 - 2, 2**42 + 2), st.integers(0, 2**15)))
 def test_varint_matches_the_runtime(n: int) -> None:
     assert dd.timestamp_field(n) == Payload.Metric(timestamp=n).SerializeToString()

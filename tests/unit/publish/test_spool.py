@@ -157,6 +157,7 @@ values = st.one_of(st.none(), st.booleans(), st.integers(-(2**63), 2**64 - 1), s
 def test_encode_decode_round_trip_property(rows: list[tuple[str, object, MetricType, int, Quality]]) -> None:
     samples = [Sample(*row) for row in rows]
     assert decode_samples(encode_samples(samples)) == samples
+    assert decode_samples(encode_samples(samples), historical=True) == [Sample(*row, True) for row in rows]
 
 
 @given(st.binary(max_size=200))
