@@ -53,7 +53,8 @@ class ReplayTarget(Protocol):
         ...
 
     def historical(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
-        """The messages of one spool row (`samples`, already marked historical)."""
+        """The messages of one spool row (`samples`, already marked historical). A target may also have
+        `historical_rows(entry, rows)`: the same from the row's parsed JSON rows (edge.publish.spool_rows)."""
         ...
 
 
@@ -68,6 +69,7 @@ class Replayer:
         self._counters = counters
         self._tasks = tasks
         self._delivered = delivered  # Sparkplug only: skip what the host has
+        self._from_rows = getattr(target, "historical_rows", None)  # Sparkplug: parsed rows to messages
         self._replaying = False
         self._again = False  # a kick came while replaying: look for rows once more before ending
 
@@ -122,7 +124,8 @@ class Replayer:
                     and not self._tasks.stopping and target.replay_ready())
 
         while current():
-            entries = spool.oldest(fmt, fetch, target.replay_devices())
+            entries = spool.oldest(fmt, fetch, target.replay_devices(), parsed=True) if self._from_rows \
+                else spool.oldest(fmt, fetch, target.replay_devices())
             if not entries:
                 if self._again:
                     self._again = False
@@ -135,9 +138,12 @@ class Replayer:
                 done.append(entry.id)
                 if delivered is not None and delivered.has_row(entry.id):
                     continue  # an earlier replay sent it: proven, or to be proven by this step's barrier
-                samples = delivered.fresh(entry.device_id, entry.samples) if delivered is not None \
-                    else entry.samples
-                messages = self._historical_messages(entry, samples)
+                try:
+                    messages = self._historical_messages(entry)
+                except _Unreadable as exc:
+                    done.pop()
+                    getattr(spool, "unreadable", _ignore)(entry.id, exc.__cause__)
+                    continue
                 for m in messages:
                     if not current():
                         return
@@ -158,7 +164,8 @@ class Replayer:
                 acked = set(done)
                 for entry in entries:
                     if entry.id in acked:
-                        delivered.discard(entry.device_id, entry.samples, entry.id)
+                        recorded = delivered.overlaps(entry.device_id, entry.timestamps())
+                        delivered.discard(entry.device_id, entry.samples if recorded else (), entry.id)
             self._counters["replayed_rows"] += len(done)
             sent_rows += len(done)
         left = spool.pending(fmt)
@@ -176,12 +183,36 @@ class Replayer:
         live = spooled(fmt) if spooled is not None else None
         return max(policy.replay_rows_per_s, policy.replay_live_factor * live) if live else policy.replay_rows_per_s
 
-    def _historical_messages(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
+    def _historical_messages(self, entry: Any) -> list[Outgoing]:
+        """A row's messages: its parsed rows straight to DATA when the target can (Sparkplug) and the host
+        has none of its values, else its samples (those the host has left out)."""
+        delivered = self._delivered
+        rows = getattr(entry, "rows", None)
+        if rows is not None and self._from_rows is not None \
+                and (delivered is None or not delivered.overlaps(entry.device_id, entry.timestamps())):
+            try:
+                return self._from_rows(entry, rows) if rows else []
+            except (TypeError, ValueError):
+                pass  # not as encode_samples writes it: read as samples (decode_samples' leniency), or dropped
+        try:
+            samples = entry.samples
+        except (TypeError, ValueError) as exc:
+            raise _Unreadable from exc
+        if delivered is not None:
+            samples = delivered.fresh(entry.device_id, samples)
         if not samples:
             return []
         if not all(map(_historical_of, samples)):  # the spool hands them out historical already
             samples = [s if s.historical else _as_historical(s) for s in samples]
         return self._target.historical(entry, samples)
+
+
+class _Unreadable(Exception):
+    """A spool row that is not one (its cause says why): dropped and counted by the spool."""
+
+
+def _ignore(*args: object) -> None:
+    return None
 
 
 class _Pacer:

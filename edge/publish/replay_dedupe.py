@@ -155,13 +155,17 @@ class DeliveredValues:
             stamps.setdefault(device_id, set()).add(ts)
         self._stamps = stamps
 
+    def overlaps(self, device_id: str, timestamps: Iterable[int]) -> bool:
+        """Values of the device with one of these CNC timestamps may be recorded (False: none is)."""
+        if not self._proven and not self._sent:
+            return False
+        stamps = self._stamps.get(device_id)
+        return stamps is not None and not stamps.isdisjoint(timestamps)
+
     def fresh(self, device_id: str, samples: Sequence[Sample]) -> Sequence[Sample]:
         """The samples the host does not have yet (counting the others in `skipped`); `samples` itself when
         none of their timestamps was ever recorded for the device (no key is built then)."""
-        if not self._proven and not self._sent:
-            return samples
-        stamps = self._stamps.get(device_id)
-        if not stamps or stamps.isdisjoint(map(_timestamp_of, samples)):
+        if not self.overlaps(device_id, map(_timestamp_of, samples)):
             return samples
         proven, sent = self._proven, self._sent
         out = []

@@ -347,3 +347,6 @@ class SparkplugSession:
 
     def historical(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
         return self.node.historical_data(entry.device_id, samples)
+
+    def historical_rows(self, entry: Any, rows: Sequence[Sequence[Any]]) -> list[Outgoing]:
+        return self.node.historical_rows(entry.device_id, rows)

@@ -36,15 +36,13 @@ from collections import Counter
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 from edge.publish.spool_disk import DiskBudget, Headroom, disk_budget, filesystem_bytes, is_full
-from edge.samples import SAMPLE_SLOT_SETTERS, MetricType, Quality, Sample
+from edge.publish.spool_rows import Format, SampleKind, SpoolEntry, encode_samples, read_entry
+from edge.samples import Sample
 
 log = logging.getLogger(__name__)
 
-Format = Literal["sparkplug", "json"]
-SampleKind = Literal["data", "events"]
 FILE_NAME = "spool.sqlite"
 
 _SCHEMA = """
@@ -70,58 +68,6 @@ class _Unsaved:
     fmt: str
     size: int
     samples: int
-
-
-@dataclass(frozen=True, slots=True)
-class SpoolEntry:
-    """One held batch: what `hold` was given, marked historical (it is replayed as such), with its row id
-    (the replay order and the ack key)."""
-
-    id: int
-    fmt: Format
-    device_id: str
-    kind: SampleKind
-    samples: list[Sample]
-
-
-def encode_samples(samples: Sequence[Sample]) -> bytes:
-    """Samples as compact JSON rows [name, value, type, ts, quality]; unknown value types become text."""
-    rows = [[s.name, s.value, s.type.value, s.timestamp_ms, int(s.quality)] for s in samples]
-    return json.dumps(rows, separators=(",", ":"), default=str).encode("utf-8")
-
-
-# The enum members by their stored values: a dict lookup per sample instead of an enum call (replay decodes
-# every spooled sample; an unknown value falls through to the enum, which says what is wrong).
-_TYPES: dict[object, MetricType] = {t.value: t for t in MetricType}
-_QUALITIES: dict[object, Quality] = {int(q): q for q in Quality}
-
-
-def decode_samples(body: bytes, historical: bool = False) -> list[Sample]:
-    """The inverse of encode_samples, the samples marked `historical` (what the replay sends); ValueError
-    (with what came) for a body that is not one.
-
-    Built slot by slot (edge.samples.SAMPLE_SLOT_SETTERS): a frozen dataclass's __init__ is twice the cost,
-    and a 1,000-machine backlog is 150,000 samples a second to decode."""
-    try:
-        out: list[Sample] = []
-        append = out.append
-        for name, value, kind, ts, quality in json.loads(body):
-            sample = _new(Sample)
-            _set_name(sample, name if type(name) is str else str(name))
-            _set_value(sample, value)
-            _set_type(sample, _TYPES.get(kind) or MetricType(kind))
-            _set_timestamp(sample, ts if type(ts) is int else int(ts))
-            _set_quality(sample, _QUALITIES.get(quality) or Quality(int(quality)))
-            _set_historical(sample, historical)
-            append(sample)
-        return out
-    except (TypeError, ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"spool row: expected a JSON list of [name, value, type, ts, quality], "
-                         f"got {body[:60]!r}: {exc}") from exc
-
-
-_new = object.__new__
-_set_name, _set_value, _set_type, _set_timestamp, _set_quality, _set_historical = SAMPLE_SLOT_SETTERS
 
 
 class DiskSpool:
@@ -264,8 +210,10 @@ class DiskSpool:
             return None
         return float(count / (last - first))
 
-    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
-        """Up to `limit` rows of one format, oldest first; only those `devices` if given.
+    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None, *,
+               parsed: bool = False) -> list[SpoolEntry]:
+        """Up to `limit` rows of one format, oldest first; only those `devices` if given; `parsed`: as
+        parsed rows (edge.publish.spool_rows.read_entry).
 
         A row whose body cannot be read is deleted and counted as dropped (it would block replay forever).
         """
@@ -290,15 +238,21 @@ class DiskSpool:
                 if row_id in self._acked or len(out) >= limit:
                     continue
                 try:
-                    samples = decode_samples(bytes(body), historical=True)
+                    out.append(read_entry(int(row_id), fmt, str(device), "events" if kind == "events" else "data",
+                                          bytes(body), rows=parsed))
                 except ValueError as exc:
-                    log.error("unreadable spool row deleted id=%d error=%s", row_id, exc)
-                    self._delete(db, [row_id])
-                    self.dropped += 1
-                    continue
-                out.append(SpoolEntry(int(row_id), fmt, str(device), "events" if kind == "events" else "data",
-                                      samples))
+                    self._drop_unreadable(db, int(row_id), exc)
             return out
+
+    def unreadable(self, row_id: int, error: Exception) -> None:
+        """A row handed out that its reader could not read: deleted and counted, as `oldest` does."""
+        with self._lock:
+            self._drop_unreadable(self._conn(), row_id, error)
+
+    def _drop_unreadable(self, db: sqlite3.Connection, row_id: int, error: Exception) -> None:
+        log.error("unreadable spool row deleted id=%d error=%s", row_id, error)
+        self._delete(db, [row_id])
+        self.dropped += 1
 
     def ack(self, ids: Sequence[int]) -> None:
         """These rows reached the broker: delete them (or, on a full disk, never hand them out again)."""

@@ -18,7 +18,7 @@ from edge.publish import replay
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.node import Outgoing
 from edge.publish.replay import Replayer
-from edge.publish.spool import SpoolEntry
+from edge.publish.spool_rows import SpoolEntry
 from edge.publish.tasks import BackgroundTasks
 from edge.samples import MetricType, Quality, Sample
 
