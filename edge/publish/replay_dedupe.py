@@ -119,11 +119,14 @@ class DeliveredValues:
         for row in rows:
             del self._rows_sent[row]
 
-    def discard(self, device_id: str, samples: Iterable[Sample], row_id: int | None = None) -> None:
-        """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory."""
-        if row_id is not None:
+    def forget_rows(self, row_ids: Iterable[int]) -> None:
+        """These rows left the spool (acknowledged): no replay can repeat them."""
+        for row_id in row_ids:
             self._rows_proven.discard(row_id)
             self._rows_sent.pop(row_id, None)
+
+    def discard(self, device_id: str, samples: Iterable[Sample]) -> None:
+        """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory."""
         if not self._proven and not self._sent:
             return
         stamps = self._stamps.get(device_id)

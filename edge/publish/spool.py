@@ -211,9 +211,9 @@ class DiskSpool:
         return float(count / (last - first))
 
     def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None, *,
-               parsed: bool = False) -> list[SpoolEntry]:
-        """Up to `limit` rows of one format, oldest first; only those `devices` if given; `parsed`: as
-        parsed rows (edge.publish.spool_rows.read_entry).
+               lazy: bool = False) -> list[SpoolEntry]:
+        """Up to `limit` rows of one format, oldest first; only those `devices` if given; `lazy`: read by
+        the caller (edge.publish.spool_rows.read_entry).
 
         A row whose body cannot be read is deleted and counted as dropped (it would block replay forever).
         """
@@ -239,7 +239,7 @@ class DiskSpool:
                     continue
                 try:
                     out.append(read_entry(int(row_id), fmt, str(device), "events" if kind == "events" else "data",
-                                          bytes(body), rows=parsed))
+                                          bytes(body), lazy=lazy))
                 except ValueError as exc:
                     self._drop_unreadable(db, int(row_id), exc)
             return out

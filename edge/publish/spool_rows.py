@@ -66,17 +66,12 @@ _set_name, _set_value, _set_type, _set_timestamp, _set_quality, _set_historical 
 
 
 def read_entry(row_id: int, fmt: Format, device_id: str, kind: SampleKind, body: bytes, *,
-               rows: bool = False) -> SpoolEntry:
-    """A stored row for the replay; ValueError for a body that is not one. With `rows`, the entry holds
-    the parsed rows, checked only for their shape (a list of five-element lists): the caller reads the
-    columns itself and reports a row it cannot read (edge.publish.spool.DiskSpool.unreadable)."""
-    if rows:
-        try:
-            parsed = json.loads(body)
-        except (ValueError, UnicodeDecodeError):
-            parsed = None
-        if type(parsed) is list and (not parsed or _shaped(parsed)):
-            return SpoolEntry(row_id, fmt, device_id, kind, rows=parsed)
+               lazy: bool = False) -> SpoolEntry:
+    """A stored row for the replay, its samples read now (ValueError for a body that is not one), or with
+    `lazy` when asked for: the entry keeps the body, the caller reads its `rows()` or `samples` and reports
+    a row it cannot read (edge.publish.spool.DiskSpool.unreadable)."""
+    if lazy:
+        return SpoolEntry(row_id, fmt, device_id, kind, body=body)
     return SpoolEntry(row_id, fmt, device_id, kind, decode_samples(body, historical=True))
 
 
@@ -85,34 +80,41 @@ def _shaped(rows: list[object]) -> bool:
 
 
 class SpoolEntry:
-    """One held batch with its row id (the replay order and the ack key): the parsed `rows`, and the
-    `samples` (marked historical: the batch is replayed as such) built from them on first use."""
+    """One held batch with its row id (the replay order and the ack key): its `samples`, marked historical
+    (the batch is replayed as such), or its stored body, read on demand as `rows()` or `samples`."""
 
-    __slots__ = ("_samples", "device_id", "fmt", "id", "kind", "rows")
+    __slots__ = ("_body", "_samples", "device_id", "fmt", "id", "kind")
 
     def __init__(self, id: int, fmt: Format, device_id: str, kind: SampleKind,
-                 samples: list[Sample] | None = None, *, rows: list[Row] | None = None) -> None:
-        if (samples is None) == (rows is None):
-            raise ValueError("a spool entry is given its samples or its parsed rows, one of the two")
+                 samples: list[Sample] | None = None, *, body: bytes | None = None) -> None:
+        if (samples is None) == (body is None):
+            raise ValueError("a spool entry is given its samples or its stored body, one of the two")
         self.id = id
         self.fmt: Format = fmt
         self.device_id = device_id
         self.kind: SampleKind = kind
-        self.rows = rows
+        self._body = body
         self._samples = samples
 
     @property
     def samples(self) -> list[Sample]:
+        """Its samples, read from the body on first use (ValueError for a body that is not a row)."""
         if self._samples is None:
-            assert self.rows is not None
-            self._samples = samples_of(self.rows, True)
+            assert self._body is not None
+            self._samples = decode_samples(self._body, historical=True)
         return self._samples
 
-    def timestamps(self) -> list[int]:
-        """The CNC timestamps of its values, without building samples."""
-        if self._samples is None and self.rows is not None:
-            return list(map(TIMESTAMP, self.rows))
-        return [s.timestamp_ms for s in self.samples]
+    def rows(self) -> list[Row] | None:
+        """The body parsed, when it is shaped as encode_samples writes it (a list of five-element lists;
+        the columns are the caller's to check); None otherwise (read `samples`). Parsed on each call, not
+        kept: a replay step holds thousands of entries."""
+        if self._body is None:
+            return None
+        try:
+            rows = json.loads(self._body)
+        except (ValueError, UnicodeDecodeError):
+            return None
+        return rows if type(rows) is list and (not rows or _shaped(rows)) else None
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, SpoolEntry):

@@ -74,7 +74,7 @@ def test_a_replayed_row_is_skipped_whole_until_acknowledged() -> None:
     d.proven(d.mark())
     d.connection_lost()
     assert d.has_row(7), "proven by a barrier: skipped on the next connection too"
-    d.discard("m1", [s(1)], 7)
+    d.forget_rows([7])
     assert not d.has_row(7) and len(d) == 0
 
 

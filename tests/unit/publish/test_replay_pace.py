@@ -136,9 +136,9 @@ def test_replay_holds_its_rate_across_steps_whose_barrier_is_slow(monkeypatch: p
 def test_replay_behind_its_pace_yields_per_slice_of_work_not_per_chunk(monkeypatch: pytest.MonkeyPatch) -> None:
     """A large fleet's live ticks make every yield cost an event-loop turn far longer than a chunk's work
     (1,000 machines: ~70 rows/s when yielding after each chunk of 50). Behind its pace (each turn here
-    costs 30 ms, the rows are due 1 ms apart), the replay yields once per SLICE_S of work and at each step's
-    barrier, not after every chunk."""
-    clock = Clock(turn_s=0.03, row_s=0.0002)
+    costs 100 ms, the rows are due 1 ms apart: after its first sleep the replay never catches up), the
+    replay yields once per SLICE_S of work and at each step's barrier, not after every chunk."""
+    clock = Clock(turn_s=0.1, row_s=0.0002)
     monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
     monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
     link, spool = asyncio.run(_replay(clock))

@@ -242,30 +242,30 @@ async def test_on_a_loop_the_rows_of_one_turn_are_committed_together_when_it_end
     again.close()
 
 
-def test_parsed_rows_are_the_stored_rows_and_build_the_same_samples(tmp_path: Path) -> None:
+def test_lazy_entries_give_the_stored_rows_and_the_same_samples(tmp_path: Path) -> None:
     spool = DiskSpool(tmp_path / "s.sqlite")
     held = [sample(1), Sample("Mode", "AUTO", MetricType.STRING, 7, Quality.STALE)]
     spool.hold("sparkplug", "m1", "data", held)
-    (entry,) = spool.oldest("sparkplug", 10, parsed=True)
-    assert entry.rows == [[s.name, s.value, s.type.value, s.timestamp_ms, int(s.quality)] for s in held]
-    assert entry.timestamps() == [s.timestamp_ms for s in held]
-    assert entry.samples == [Sample(*[getattr(s, f) for f in ("name", "value", "type", "timestamp_ms",
-                                                             "quality")], True) for s in held]
-    assert entry == spool.oldest("sparkplug", 10)[0], "parsed or not, the same entry"
+    (entry,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert entry.rows() == [[s.name, s.value, s.type.value, s.timestamp_ms, int(s.quality)] for s in held]
+    assert entry.samples == [Sample(s.name, s.value, s.type, s.timestamp_ms, s.quality, True) for s in held]
+    assert entry == spool.oldest("sparkplug", 10)[0], "lazy or not, the same entry"
     spool.close()
 
 
-def test_a_row_not_shaped_as_written_is_dropped_and_a_reader_may_drop_one_too(tmp_path: Path) -> None:
+def test_a_lazy_row_not_shaped_as_written_has_no_rows_and_a_reader_may_drop_it(tmp_path: Path) -> None:
     spool = DiskSpool(tmp_path / "s.sqlite")
     spool.hold("sparkplug", "m1", "data", [sample(1)])
     db = spool._conn()
     db.execute("UPDATE spool SET body = ?", (b'[["Macro/500", 1.0, "Double", 5.0, 192, "extra"]]',))
-    assert spool.oldest("sparkplug", 10, parsed=True) == [], "six columns: unreadable, as before"
+    (six,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert six.rows() is None, "six columns: not a row"
+    with pytest.raises(ValueError, match="expected a JSON list"):
+        six.samples  # noqa: B018 (the property reads the body)
+    spool.unreadable(six.id, ValueError("six columns"))
     assert spool.dropped == 1 and spool.pending() == 0
     spool.hold("sparkplug", "m1", "data", [sample(2)])
     db.execute("UPDATE spool SET body = ?", (b'[["Macro/500", 2.0, "Double", 5.0, 192]]',))
-    (lenient,) = spool.oldest("sparkplug", 10, parsed=True)
-    assert lenient.samples[0].timestamp_ms == 5, "a float timestamp: its samples are still read leniently"
-    spool.unreadable(lenient.id, ValueError("a reader could not read it"))
-    assert spool.dropped == 2 and spool.pending() == 0
+    (lenient,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert lenient.rows() is not None and lenient.samples[0].timestamp_ms == 5, "a float timestamp: read leniently"
     spool.close()
