@@ -211,9 +211,10 @@ class DiskSpool:
         return float(count / (last - first))
 
     def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None, *,
-               lazy: bool = False) -> list[SpoolEntry]:
-        """Up to `limit` rows of one format, oldest first; only those `devices` if given; `lazy`: read by
-        the caller (edge.publish.spool_rows.read_entry).
+               lazy: bool = False, after: int = 0) -> list[SpoolEntry]:
+        """Up to `limit` rows of one format, oldest first; only those `devices` if given; only rows after
+        row id `after` (those before are in flight); `lazy`: read by the caller (edge.publish.spool_rows.
+        read_entry).
 
         A row whose body cannot be read is deleted and counted as dropped (it would block replay forever).
         """
@@ -224,15 +225,15 @@ class DiskSpool:
             self._enforce_age(db)
             want = limit + len(self._acked)
             if devices is None:
-                rows = db.execute("SELECT id, device, kind, body FROM spool WHERE fmt = ? ORDER BY id LIMIT ?",
-                                  (fmt, want)).fetchall()
+                rows = db.execute("SELECT id, device, kind, body FROM spool WHERE fmt = ? AND id > ? ORDER BY id "
+                                  "LIMIT ?", (fmt, after, want)).fetchall()
             else:
                 wanted = sorted(devices)
                 if not wanted:
                     return []
                 marks = ",".join("?" * len(wanted))
-                rows = db.execute(f"SELECT id, device, kind, body FROM spool WHERE fmt = ? AND device IN "
-                                  f"({marks}) ORDER BY id LIMIT ?", (fmt, *wanted, want)).fetchall()
+                rows = db.execute(f"SELECT id, device, kind, body FROM spool WHERE fmt = ? AND id > ? AND device "
+                                  f"IN ({marks}) ORDER BY id LIMIT ?", (fmt, after, *wanted, want)).fetchall()
             out: list[SpoolEntry] = []
             for row_id, device, kind, body in rows:
                 if row_id in self._acked or len(out) >= limit:
@@ -490,7 +491,8 @@ class UnopenedSpool:
     def pending(self, fmt: Format | None = None) -> int:
         return 0
 
-    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None) -> list[SpoolEntry]:
+    def oldest(self, fmt: Format, limit: int, devices: Collection[str] | None = None, *, lazy: bool = False,
+               after: int = 0) -> list[SpoolEntry]:
         return []
 
     def ack(self, ids: Sequence[int]) -> None:

@@ -91,13 +91,13 @@ class Target:
 class Spool:
     def __init__(self) -> None:
         sample = Sample("x", 1, MetricType.INT32, 0, Quality.GOOD, False)
-        self.rows = [SpoolEntry(i, "sparkplug", "m1", "data", [sample]) for i in range(ROWS)]
+        self.rows = [SpoolEntry(i, "sparkplug", "m1", "data", [sample]) for i in range(1, ROWS + 1)]
 
     def hold(self, *args: Any) -> None:
         raise AssertionError("nothing is held during this replay")
 
-    def oldest(self, fmt: str, limit: int, devices: Any = None) -> list[SpoolEntry]:
-        return self.rows[:limit]
+    def oldest(self, fmt: str, limit: int, devices: Any = None, after: int = 0) -> list[SpoolEntry]:
+        return [r for r in self.rows if r.id > after][:limit]
 
     def ack(self, ids: Sequence[int]) -> None:
         acked = set(ids)
