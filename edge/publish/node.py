@@ -181,14 +181,16 @@ class SparkplugNode:
         return out
 
     def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
-        """The device values births carry (each online device's latest, or one device's), then any events
-        a rebirth held: what the next births() (or that device's DBIRTH) will send."""
+        """The device values births carry (each online device's latest, or one device's): what the next
+        births() (or that device's DBIRTH) will send, beside `held_events`."""
         if device_id is not None:
             dev = self._devices.get(device_id)
             return [(device_id, list(dev.last.values()))] if dev is not None and dev.online else []
-        out = [(d, list(dev.last.values())) for d, dev in self._devices.items() if dev.online]
-        out.extend((d, list(events)) for d, events in self._held_events)
-        return out
+        return [(d, list(dev.last.values())) for d, dev in self._devices.items() if dev.online]
+
+    def held_events(self) -> list[tuple[str, list[Sample]]]:
+        """The events a rebirth held, which the next births() sends after the DBIRTHs."""
+        return [(d, list(events)) for d, events in self._held_events]
 
     def _add_birth_metrics(self, p: Payload, dev: _Device, ts: int) -> None:
         for name, spec in dev.specs.items():

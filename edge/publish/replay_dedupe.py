@@ -72,7 +72,11 @@ class DeliveredValues:
     def __init__(self, limit: int = DEFAULT_LIMIT) -> None:
         self._proven: set[Key] = set()
         self._sent: dict[Key, int] = {}  # key -> the record call that added it (a barrier proves earlier ones)
-        self._stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys (and maybe of gone ones)
+        # The values births carried, per device: the samples themselves by metric name, no key built (a
+        # DBIRTH of every machine is every metric of the fleet: ~20 MB of keys at 1,000 x 100 metrics).
+        self._births_proven: dict[str, list[dict[str, Sample]]] = {}
+        self._births_sent: dict[str, list[tuple[int, dict[str, Sample]]]] = {}
+        self._stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys and births (and maybe gone ones)
         self._rows_proven: set[int] = set()
         self._rows_sent: dict[int, int] = {}  # spool row id -> the record call that sent it
         self._calls = 0
@@ -92,6 +96,13 @@ class DeliveredValues:
         for s in samples:
             self._sent.setdefault(_key(device_id, s), call)
             stamps.add(s.timestamp_ms)
+
+    def record_birth(self, device_id: str, values: Iterable[Sample]) -> None:
+        """A DBIRTH carrying these values (one per metric) went out on the current connection."""
+        self._calls += 1
+        births = {s.name: s for s in values}
+        self._births_sent.setdefault(device_id, []).append((self._calls, births))
+        self._stamps.setdefault(device_id, set()).update(map(_timestamp_of, births.values()))
 
     def record_row(self, row_id: int) -> None:
         """This spool row was replayed whole on the current connection."""
@@ -118,6 +129,13 @@ class DeliveredValues:
         self._rows_proven.update(rows)
         for row in rows:
             del self._rows_sent[row]
+        for device_id, births in list(self._births_sent.items()):
+            self._births_proven.setdefault(device_id, []).extend(b for call, b in births if call <= mark)
+            later = [(call, b) for call, b in births if call > mark]
+            if later:
+                self._births_sent[device_id] = later
+            else:
+                del self._births_sent[device_id]
 
     def forget_rows(self, row_ids: Iterable[int]) -> None:
         """These rows left the spool (acknowledged): no replay can repeat them."""
@@ -126,7 +144,8 @@ class DeliveredValues:
             self._rows_sent.pop(row_id, None)
 
     def discard(self, device_id: str, samples: Iterable[Sample]) -> None:
-        """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory."""
+        """These samples' rows left the spool (acknowledged): no replay can repeat them, keep no memory of
+        their keys (births are kept until the spool is empty)."""
         if not self._proven and not self._sent:
             return
         stamps = self._stamps.get(device_id)
@@ -141,6 +160,7 @@ class DeliveredValues:
     def connection_lost(self) -> None:
         """What the old connection sent without proof may not have arrived."""
         self._sent = {}
+        self._births_sent = {}
         self._rows_sent = {}
         self._reindex()
 
@@ -148,6 +168,8 @@ class DeliveredValues:
         """The spool is empty: no replayed row can repeat any of it."""
         self._proven = set()
         self._sent = {}
+        self._births_proven = {}
+        self._births_sent = {}
         self._stamps = {}
         self._rows_proven = set()
         self._rows_sent = {}
@@ -156,14 +178,25 @@ class DeliveredValues:
         stamps: dict[str, set[int]] = {}
         for device_id, _, ts, _ in self._proven:
             stamps.setdefault(device_id, set()).add(ts)
+        for device_id, births in self._births_proven.items():
+            for b in births:
+                stamps.setdefault(device_id, set()).update(map(_timestamp_of, b.values()))
         self._stamps = stamps
 
     def overlaps(self, device_id: str, timestamps: Iterable[int]) -> bool:
         """Values of the device with one of these CNC timestamps may be recorded (False: none is)."""
-        if not self._proven and not self._sent:
-            return False
         stamps = self._stamps.get(device_id)
         return stamps is not None and not stamps.isdisjoint(timestamps)
+
+    def _born(self, device_id: str, s: Sample) -> bool:
+        """A birth on this connection, or a proven one, carried this very value."""
+        births = [b for _, b in self._births_sent.get(device_id, ())]
+        for b in (*self._births_proven.get(device_id, ()), *births):
+            carried = b.get(s.name)
+            if carried is not None and carried.timestamp_ms == s.timestamp_ms \
+                    and value_key(carried.value) == value_key(s.value):
+                return True
+        return False
 
     def fresh(self, device_id: str, samples: Sequence[Sample]) -> Sequence[Sample]:
         """The samples the host does not have yet (counting the others in `skipped`); `samples` itself when
@@ -171,10 +204,11 @@ class DeliveredValues:
         if not self.overlaps(device_id, map(_timestamp_of, samples)):
             return samples
         proven, sent = self._proven, self._sent
+        born = device_id in self._births_proven or device_id in self._births_sent
         out = []
         for s in samples:
             key = _key(device_id, s)
-            if key not in proven and key not in sent:
+            if key not in proven and key not in sent and not (born and self._born(device_id, s)):
                 out.append(s)
         self.skipped += len(samples) - len(out)
         return out

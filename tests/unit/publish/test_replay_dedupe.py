@@ -92,3 +92,19 @@ def test_timestamps_never_recorded_pass_without_a_key_and_the_index_follows_the_
     assert d.fresh("m1", [s(4), s(5)]) == [s(5)], "proven values stay indexed across connections"
     d.forget()
     assert d.fresh("m1", [s(4)]) == [s(4)] and d.skipped == 2
+
+
+def test_birth_values_are_kept_by_reference_and_follow_the_connection() -> None:
+    d = DeliveredValues()
+    d.record_birth("m1", [s(1), s(2, name="Macro/501")])
+    assert d.fresh("m1", [s(1), s(1, value=2.5), s(3)]) == [s(1, value=2.5), s(3)]
+    assert d.fresh("m1", [s(2)]) == [s(2)], "the birth carried Macro/501 at 2, not Macro/500"
+    d.connection_lost()
+    assert d.fresh("m1", [s(1)]) == [s(1)], "a birth not proven may not have arrived"
+    d.record_birth("m1", [s(1)])
+    d.proven(d.mark())
+    d.record_birth("m1", [s(4)])  # a rebirth after the barrier: not proven by it
+    d.connection_lost()
+    assert d.fresh("m1", [s(1), s(4)]) == [s(4)] and len(d) == 0, "births are not keys"
+    d.forget()
+    assert d.fresh("m1", [s(1)]) == [s(1)]
