@@ -147,3 +147,18 @@ def test_replay_behind_its_pace_yields_per_slice_of_work_not_per_chunk(monkeypat
     slices = math.ceil(ROWS * clock.row_s / replay.SLICE_S)
     assert clock.yields <= per_step * link.barriers + slices + 1
     assert clock.yields < ROWS // link.policy.replay_batch + per_step * link.barriers  # per chunk: 40
+
+
+def test_behind_its_pace_the_replay_takes_a_slice_as_long_as_the_live_turn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When a live turn takes 100 ms, a 20 ms slice gives the replay a sixth of the loop (1,000 machines:
+    5x the live rate against the 12x asked for); a slice as long as the turn (up to MAX_SLICE_S) gives it
+    about half: a yield per MAX_SLICE_S of work, not per SLICE_S."""
+    clock = Clock(turn_s=replay.MAX_SLICE_S, row_s=0.0003)
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    link, spool = asyncio.run(_replay(clock))
+    assert spool.rows == [] and link.sent == ROWS
+    per_step = 2  # the step's final pace and the barrier's wait for its PUBACK
+    work = ROWS * clock.row_s
+    assert clock.yields <= per_step * link.barriers + math.ceil(work / replay.MAX_SLICE_S) + 2
+    assert clock.yields < math.ceil(work / replay.SLICE_S)
