@@ -309,6 +309,7 @@ class MachinePoller:
         self._start.release()
         if first.events or first.history:
             await self._emit_events(first.events, first.history)
+        del first, specs, extra, born  # the loop keeps this frame for the session: not the births' samples
         fastest = min(plan.periods.values())
         while True:
             next_due = schedule.next_due() or time.monotonic() + fastest

@@ -17,6 +17,7 @@ from edge.config.machines import AlarmsConfig, MachineConfig
 from edge.config.mqtt import MqttConfig
 from edge.config.opcua import OpcUaConfig
 from edge.config.poll import AUTO_POLL_GRID_CAP_S, PollGrid
+from edge.config.sharing import share_equal_parts
 from edge.config.writes import MachineWrites, WritePolicy, WritesConfig
 
 DEFAULT_STATE_DIR = Path("/var/lib/focas-edge")
@@ -65,6 +66,11 @@ class Config(_Model):
                     raise ValueError(f"machine {machine.id!r} polls {machine.paths} paths, so its path {device.path} "
                                      f"is the device {device.id!r}, already a machine id")
         return machines
+
+    @field_validator("machines")
+    @classmethod
+    def _share_equal_parts(cls, machines: list[MachineConfig]) -> list[MachineConfig]:
+        return share_equal_parts(machines)  # edge.config.sharing: one PollPlan for machines polling alike
 
     @model_validator(mode="after")
     def _grid_fits_every_period(self) -> Config:

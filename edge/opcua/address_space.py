@@ -21,13 +21,29 @@ from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import notify_all
+from edge.opcua.subscriptions import GatewayMonitoredItems, notify_all
 from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
 from edge.samples import MetricSpec, MetricType, Sample
 
 log = logging.getLogger(__name__)
 
 _WAITING = "BadWaitingForInitialData"
+
+Pending = tuple[int, Any, SharedDataValue]  # (handle, asyncua data-change callback, value) to await
+_NO_PENDING: list[Pending] = []  # shared, never appended to: `_pending` copies it first
+
+
+def _pending(slow: list[Pending], others: Any, value: SharedDataValue) -> list[Pending]:
+    if slow is _NO_PENDING:
+        slow = []
+    slow.extend((handle, callback, value) for handle, callback in others)
+    return slow
+
+
+async def deliver(slow: list[Pending]) -> None:
+    """Hand changes to the monitored items on asyncua's own path (items with a filter), in order."""
+    for handle, callback, value in slow:
+        await callback(handle, value)
 
 
 @dataclass(slots=True)
@@ -174,14 +190,16 @@ class GatewaySpace:
         log.info("metrics removed from OPC UA machine=%s count=%d", machine.device_id, len(names))
 
     # ---- values ------------------------------------------------------------------------------------
-    async def update(self, device_id: str, samples: Iterable[Sample]) -> None:
-        """Show the samples' values and tell the monitored items."""
+    def show(self, device_id: str, samples: Iterable[Sample]) -> list[Pending]:
+        """Show the samples' values and tell the gateway's monitored items, synchronously; returns the
+        monitored items that need asyncua's coroutine (a filter), to be awaited in order (`deliver`)."""
         machine = self.machines.get(device_id)
         if machine is None:
-            return
+            return _NO_PENDING
         slots = machine.slots
         now = server_now()
         count = 0
+        slow = _NO_PENDING
         for sample in samples:
             slot = slots.get(sample.name)
             if slot is None or sample.historical:
@@ -189,25 +207,39 @@ class GatewaySpace:
             value = data_value(sample, now)
             for attribute in slot.attributes:
                 attribute.value = value
-                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
-                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
-                        await callback(handle, value)  # any other monitored item, through asyncua
+                callbacks = attribute.datachange_callbacks
+                if callbacks:  # monitored: the gateway's items take it synchronously (notify_all, inlined)
+                    for handle, callback in callbacks.items():
+                        owner = getattr(callback, "__self__", None)
+                        if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+                            slow = _pending(slow, ((handle, callback),), value)
             count += 1
         self.values_set += count
+        return slow
 
-    async def offline(self, device_id: str) -> None:
+    def show_offline(self, device_id: str) -> list[Pending]:
         """The machine's CNC session is down: every value Bad (BadNoCommunication), no value."""
         machine = self.machines.get(device_id)
         if machine is None:
-            return
+            return _NO_PENDING
         machine.online = False
         value = offline_value(server_now())
+        slow = _NO_PENDING
         for slot in machine.slots.values():
             for attribute in slot.attributes:
                 attribute.value = value
                 if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
-                    for handle, callback in notify_all(attribute.datachange_callbacks, value):
-                        await callback(handle, value)  # any other monitored item, through asyncua
+                    others = notify_all(attribute.datachange_callbacks, value)
+                    if others:
+                        slow = _pending(slow, others, value)
+        return slow
+
+    async def update(self, device_id: str, samples: Iterable[Sample]) -> None:
+        """Show the samples' values and tell every monitored item."""
+        await deliver(self.show(device_id, samples))
+
+    async def offline(self, device_id: str) -> None:
+        await deliver(self.show_offline(device_id))
 
     def metric_of(self, node_id: ua.NodeId) -> tuple[str, str] | None:
         """(machine, metric) shown by a node, else None."""

@@ -3,8 +3,13 @@ MQTT publisher gets, handed to the server without ever waiting on it.
 
 The collector calls the `device_*` methods on the daemon's loop; they append to a mailbox and return
 (no await on the server). The server drains the mailbox on its event loop: by default the daemon's own,
-or (`threaded`) a loop in a thread of its own. Measured at 100 machines x 10 Hz with a client subscribed
-to everything (docs/opcua.md), the daemon's loop serves better: in a thread the server's steady work
+or (`threaded`) a loop in a thread of its own. On the daemon's own loop a data batch (a thousand a
+second at 100 machines x 10 Hz) is applied in the call instead, when nothing is queued before it: setting
+the values and telling the gateway's monitored items is synchronous work the drain would do a moment
+later on the same loop, so the mailbox entry and the drain task's wake-up per batch are saved.
+
+Measured at 100 machines x 10 Hz with a client subscribed to everything (docs/opcua.md), the daemon's
+loop serves better: in a thread the server's steady work
 takes the interpreter lock in 5 ms slices and the poll loop, which wakes a thousand times a second,
 waits for it (poll overruns, MQTT p99 up 2-3x); only a single huge request (10,000 monitored items at
 once) holds the daemon's loop longer than the thread would.
@@ -25,6 +30,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from edge.opcua.address_space import deliver
 from edge.opcua.server import GatewayServer, MetricWrite, MetricWriter
 from edge.opcua.settings import OpcUaSettings
 from edge.opcua.writes import WriteOutcome
@@ -51,6 +57,8 @@ class OpcUaOutput:
         self.server = GatewayServer(settings, self._write if writer is not None else None)
         self._mailbox: deque[tuple[Any, ...]] = deque()
         self._wake_pending = False
+        self._inline = False  # data batches applied in device_data: the server runs on the daemon's loop
+        self._draining = False
         self._wake: asyncio.Event | None = None
         self._server_loop: asyncio.AbstractEventLoop | None = None
         self._daemon_loop: asyncio.AbstractEventLoop | None = None
@@ -129,11 +137,13 @@ class OpcUaOutput:
         self._wake = asyncio.Event()
         await self.server.start()
         self._drain = asyncio.create_task(self._drain_loop(), name="opcua-drain")
+        self._inline = self._thread is None
         if self._mailbox:  # posted before the server was up
             self._wake_pending = True
             self._wake.set()
 
     async def _serve_stop(self) -> None:
+        self._inline = False
         drain, self._drain = self._drain, None
         if drain is not None:
             drain.cancel()
@@ -148,6 +158,9 @@ class OpcUaOutput:
         self._post(("online", device_id, tuple(specs), tuple(samples), writable))
 
     async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
+        if self._inline and not self._mailbox and not self._draining:
+            self._show(device_id, samples)
+            return
         if len(self._mailbox) >= MAILBOX_LIMIT:
             self.dropped += len(samples)
             if self.dropped == len(samples):
@@ -160,6 +173,20 @@ class OpcUaOutput:
 
     async def device_offline(self, device_id: str) -> None:
         self._post(("offline", device_id))
+
+    def _show(self, device_id: str, samples: Sequence[Sample]) -> None:
+        """Apply a data batch right away (server on this loop, nothing queued before it): the values are
+        set and the gateway's monitored items told synchronously, as the drain would a moment later, without
+        a mailbox entry and a wake-up of the drain task per batch. Items on asyncua's path are awaited by
+        the drain, in order."""
+        try:
+            slow = self.server.show_data(device_id, samples)
+        except Exception:
+            self.failures += 1
+            log.exception("OPC UA server could not apply kind=data machine=%s", device_id)
+            return
+        if slow:
+            self._post(("deliver", device_id, slow))
 
     def _post(self, item: tuple[Any, ...]) -> None:
         self._mailbox.append(item)
@@ -183,6 +210,7 @@ class OpcUaOutput:
             await wake.wait()
             wake.clear()
             self._wake_pending = False  # before draining: a post after this point wakes us again
+            self._draining = True  # an item being applied is out of the mailbox: later data must queue
             while mailbox:
                 item = mailbox.popleft()
                 try:
@@ -190,6 +218,7 @@ class OpcUaOutput:
                 except Exception:
                     self.failures += 1
                     log.exception("OPC UA server could not apply kind=%s machine=%s", item[0], item[1])
+            self._draining = False
 
     @staticmethod
     async def _apply(server: GatewayServer, item: tuple[Any, ...]) -> None:
@@ -202,6 +231,8 @@ class OpcUaOutput:
             await server.machine_online(item[1], item[2], item[3], item[4])
         elif kind == "offline":
             await server.machine_offline(item[1])
+        elif kind == "deliver":
+            await deliver(item[2])
 
     async def _write(self, request: MetricWrite) -> WriteOutcome:
         """Run the write on the daemon's loop; wait up to write_timeout_s, never cancel it."""

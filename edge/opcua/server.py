@@ -19,7 +19,7 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
 
 from edge.opcua import alarms, layout, subscriptions
-from edge.opcua.address_space import GatewaySpace
+from edge.opcua.address_space import GatewaySpace, Pending
 from edge.opcua.security import PasswordUsers, ensure_certificate
 from edge.opcua.settings import SECURITY_MODES, OpcUaSettings
 from edge.opcua.values import client_value, status_code
@@ -117,6 +117,11 @@ class GatewayServer:
     async def machine_data(self, device_id: str, samples: Sequence[Sample]) -> None:
         assert self.space is not None
         await self.space.update(device_id, samples)
+
+    def show_data(self, device_id: str, samples: Sequence[Sample]) -> list[Pending]:
+        """machine_data without awaiting: what is left for asyncua's own monitored items (`deliver` it)."""
+        assert self.space is not None
+        return self.space.show(device_id, samples)
 
     async def machine_events(self, device_id: str, samples: Sequence[Sample]) -> None:
         assert self.space is not None and self.alarms is not None

@@ -13,9 +13,9 @@ client subscribed to every metric that was most of the gateway's CPU (docs/opcua
 - `GatewaySubscription` publishes the queued changes as one pre-encoded DataChangeNotification
   (edge.opcua.encoding): the same bytes asyncua writes, from values encoded once when they were built.
 
-asyncua builds the subscription objects itself, with no factory to hand it a subclass; the subclasses
-here add methods and no state, so `install` switches the class of the service and of each new
-subscription (a subscription has no monitored item yet when it is switched).
+asyncua builds the subscription objects itself, with no factory to hand it a subclass; the subscription
+subclass adds methods and no state, so `install` switches the class of the service and of each new
+subscription, and gives it a GatewayMonitoredItems (a subscription has no monitored item yet then).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.monitored_item_service import MonitoredItemService
 from asyncua.server.subscription_service import SubscriptionService
 
-from edge.opcua.encoding import data_change_notification
+from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
 from edge.opcua.values import SharedDataValue
 
 _DISABLED = ua.MonitoringMode.Disabled
@@ -38,35 +38,54 @@ _DISABLED = ua.MonitoringMode.Disabled
 class GatewayMonitoredItems(MonitoredItemService):
     """asyncua's monitored items of one subscription, with a synchronous path for a value change."""
 
+    def __init__(self, isub: InternalSubscription, aspace: Any) -> None:
+        super().__init__(isub, aspace)
+        # callback handle -> (monitored item id, item), resolved on the item's first change: one lookup
+        # per change instead of two. asyncua never reuses a handle, and a deleted item's callback is gone
+        # from its attribute, so an entry is never stale when it is used; it is dropped with the item.
+        self._resolved: dict[int, tuple[int, Any, bytes]] = {}  # + the item's encoded client handle
+
     def notify(self, handle: int, value: ua.DataValue) -> bool:
         """Queue the change for the item behind `handle`; False when the item needs asyncua's path.
 
         `value` must never be changed afterwards (it is kept, not copied)."""
-        mid = self._monitored_datachange.get(handle)
-        if mid is None:
-            return True
-        item = self._monitored_items.get(mid)
-        if item is None or item.mode == _DISABLED:
+        resolved = self._resolved.get(handle)
+        if resolved is None:
+            mid = self._monitored_datachange.get(handle)
+            item = self._monitored_items.get(mid) if mid is not None else None
+            if item is None:
+                return True
+            resolved = self._resolved[handle] = (mid, item, handle_prefix(item.client_handle))
+        mid, item, prefix = resolved
+        if item.mode == _DISABLED:
             return True
         subscription = self.isub
         if item.filter or subscription.data.RevisedPublishingInterval <= 0:  # a filter as asyncua reads it
             return False
         values = item.mvalue
         previous = values.current_dvalue
-        values.old_dvalue = previous
-        values.current_dvalue = value
+        values.current_dvalue = value  # (asyncua's own path moves current to old itself)
         if previous is not None and (previous is value or (previous.StatusCode == value.StatusCode
                                                              and previous.Value == value.Value)):
             return True  # asyncua's default trigger (StatusValue): nothing a client sees has changed
+        # a client's subscription queues the notification's bytes; the server's own ones read objects
+        note: Any = prefix + data_value_bytes(value) if subscription.pub_request_callback is not None \
+            else (item.client_handle, value)
         queue = subscription._triggered_datachanges
         pending = queue.get(mid)
         if pending is None:
-            queue[mid] = [(item.client_handle, value)]
+            queue[mid] = [note]
             return True
         if item.queue_size and len(pending) >= item.queue_size:
             del pending[0]  # asyncua's choice whatever DiscardOldest says: the oldest goes
-        pending.append((item.client_handle, value))
+        pending.append(note)
         return True
+
+    def _delete_monitored_items(self, mid: int) -> ua.StatusCode:
+        item = self._monitored_items.get(mid)
+        if item is not None:
+            self._resolved.pop(item.callback_handle, None)
+        return super()._delete_monitored_items(mid)
 
     async def datachange_callback(self, handle: int, value: ua.DataValue, error: ua.StatusCode | None = None) -> None:
         if error is None:
@@ -84,19 +103,20 @@ class GatewaySubscription(InternalSubscription):
         queued: dict[int, list[Any]] = self._triggered_datachanges
         if not queued:
             return
-        changes = [_pair(note) for notes in queued.values() for note in notes]
-        queued.clear()
         notification: Any
         if self.pub_request_callback is None:  # one of the server's own: its callback reads the objects
             notification = ua.DataChangeNotification(MonitoredItems=[
-                ua.MonitoredItemNotification(ClientHandle=handle, Value=value) for handle, value in changes])
+                ua.MonitoredItemNotification(ClientHandle=handle, Value=value)
+                for notes in queued.values() for handle, value in map(_pair, notes)])
         else:
-            notification = data_change_notification(changes)
+            notification = data_change_of_notes(queued.values())
+        queued.clear()
         result.NotificationMessage.NotificationData.append(notification)
 
 
 def _pair(note: Any) -> tuple[int, ua.DataValue]:
-    """(client handle, value) of a queued change: ours are pairs, asyncua's MonitoredItemNotifications."""
+    """(client handle, value) of a change queued for one of the server's own subscriptions: ours are pairs,
+    asyncua's MonitoredItemNotifications."""
     if isinstance(note, tuple):
         return note
     return note.ClientHandle, note.Value

@@ -11,13 +11,14 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from operator import attrgetter, itemgetter
 from typing import Any
 
 from edge.publish import ddata as dd
 from edge.publish import payload as pl
 from edge.publish.aliases import NODE, AliasMap
+from edge.publish.device_table import DeviceTable, MetricLayout, layout_of
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 
@@ -82,24 +83,6 @@ class CommandIgnored:
 CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
 
 
-# name -> (alias field bytes, value field writer, type, alias): what DATA and births need per metric
-_Encoder = tuple[bytes, dd.ValueField, MetricType, int]
-
-
-def _encoder(alias: int, mtype: MetricType) -> _Encoder:
-    return dd.alias_field(alias), dd.VALUE_FIELDS[mtype], mtype, alias
-
-
-@dataclass
-class _Device:
-    specs: dict[str, MetricSpec]
-    last: dict[str, Sample] = field(default_factory=dict)
-    encoders: dict[str, _Encoder] = field(default_factory=dict)
-    online: bool = False
-    not_good: set[str] = field(default_factory=set)  # published last with a non-GOOD quality
-    data_topic: str = ""  # its DDATA topic (NDATA for the node)
-
-
 class SparkplugNode:
     """Births, data, deaths and commands for one edge node and its devices."""
 
@@ -114,8 +97,8 @@ class SparkplugNode:
         self.born = False  # an NBIRTH went out in the current MQTT session
         self.holding = False  # a rebirth is pending: DATA stops until the births are re-sent
         self._held_events: list[tuple[str, list[Sample]]] = []
-        self._node = _Device(specs={}, online=True)  # NDATA goes to _ndata_topic
-        self._devices: dict[str, _Device] = {}
+        self._node = DeviceTable(layout_of(()), (), online=True)  # NDATA goes to _ndata_topic
+        self._devices: dict[str, DeviceTable] = {}
         self.unknown_metrics = 0
         self.encode_errors = 0
         self._warned: set[tuple[str, str]] = set()
@@ -168,7 +151,7 @@ class SparkplugNode:
         p = Payload(timestamp=ts, seq=self._next_seq())
         p.metrics.add(name=pl.BDSEQ_METRIC, datatype=DataType.Int64, timestamp=ts, long_value=self._bdseq)
         p.metrics.add(name=pl.REBIRTH_METRIC, datatype=DataType.Boolean, timestamp=ts, boolean_value=False)
-        self._add_birth_metrics(p, self._node, ts)
+        self._add_birth_metrics(p, NODE, self._node, ts)
         out = [Outgoing(self.nbirth_topic, p.SerializeToString())]
         self.born = True
         self.holding = False
@@ -185,36 +168,37 @@ class SparkplugNode:
         births() (or that device's DBIRTH) will send, beside `held_events`."""
         if device_id is not None:
             dev = self._devices.get(device_id)
-            return [(device_id, list(dev.last.values()))] if dev is not None and dev.online else []
-        return [(d, list(dev.last.values())) for d, dev in self._devices.items() if dev.online]
+            return [(device_id, dev.last_samples())] if dev is not None and dev.online else []
+        return [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
 
     def held_events(self) -> list[tuple[str, list[Sample]]]:
         """The events a rebirth held, which the next births() sends after the DBIRTHs."""
         return [(d, list(events)) for d, events in self._held_events]
 
-    def _add_birth_metrics(self, p: Payload, dev: _Device, ts: int) -> None:
-        for name, spec in dev.specs.items():
-            sample = dev.last.get(name)
+    def _add_birth_metrics(self, p: Payload, device_key: str, dev: DeviceTable, ts: int) -> None:
+        alias_of = self._aliases.alias  # assigned when the device was declared: a lookup here
+        for spec, sample in zip(dev.layout.specs.values(), dev.last, strict=True):
+            name = spec.name
             value = None if sample is None else sample.value
             quality = Quality.GOOD if sample is None else sample.quality
             try:
-                m = pl.add_birth_metric(p.metrics, name, dev.encoders[name][3], spec.type, value,
+                m = pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, value,
                                         ts if sample is None else sample.timestamp_ms, unit=spec.unit,
                                         quality=quality, description=spec.description)
             except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
                 self._encode_failed(name, exc)
                 del p.metrics[-1]
-                pl.add_birth_metric(p.metrics, name, dev.encoders[name][3], spec.type, None, ts,
+                pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, None, ts,
                                     unit=spec.unit, quality=Quality.BAD, description=spec.description)
                 continue
             if sample is not None and sample.historical:
                 m.is_historical = True
-        dev.not_good = {n for n, s in dev.last.items() if s.quality is not Quality.GOOD}
+        dev.not_good = {s.name for s in dev.last if s is not None and s.quality is not Quality.GOOD}
 
-    def _dbirth(self, device_id: str, dev: _Device) -> Outgoing:
+    def _dbirth(self, device_id: str, dev: DeviceTable) -> Outgoing:
         ts = self._clock()
         p = Payload(timestamp=ts, seq=self._next_seq())
-        self._add_birth_metrics(p, dev, ts)
+        self._add_birth_metrics(p, device_id, dev, ts)
         return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), p.SerializeToString())
 
     def request_rebirth(self) -> bool:
@@ -247,17 +231,16 @@ class SparkplugNode:
     def set_node_metrics(self, samples: Sequence[Sample]) -> list[Outgoing]:
         """Record gateway metrics; NDATA for changed ones, or a full rebirth when a new metric appears."""
         node = self._node
-        new = [s for s in samples if s.name not in node.specs]
-        for s in new:
-            check_metric_name(s.name)
-            node.specs[s.name] = MetricSpec(s.name, s.type)
-            node.encoders[s.name] = _encoder(self._aliases.alias(NODE, s.name), s.type)
+        new = [s for s in samples if s.name not in node.layout.slots]
         if new:
+            added: dict[str, MetricSpec] = {}
+            for s in new:
+                added[check_metric_name(s.name)] = MetricSpec(s.name, s.type)
+            node = self._node = self._grown(NODE, node, node.layout.extended(list(added.values())))
             self._aliases.save()
-        changed = [s for s in samples if (old := node.last.get(s.name)) is None or old.value != s.value
+        changed = [s for s in samples if (old := node.last_of(s.name)) is None or old.value != s.value
                    or old.quality is not s.quality]
-        for s in samples:
-            node.last[s.name] = s
+        node.record(samples)
         if not self.live:
             return []
         if new:
@@ -272,21 +255,15 @@ class SparkplugNode:
                       samples: Sequence[Sample]) -> list[Outgoing]:
         """Declare a device with every metric it will report; DBIRTH now if the node is born."""
         check_id("device id", device_id)
-        spec_map: dict[str, MetricSpec] = {}
         for spec in specs:
             check_metric_name(spec.name)
-            spec_map[spec.name] = spec
-        encoders = {n: _encoder(self._aliases.alias(device_id, n), spec.type) for n, spec in spec_map.items()}
-        self._aliases.save()
         old = self._devices.get(device_id)
-        dev = _Device(specs=spec_map, online=True,
-                      data_topic=self._device_topic.format(kind="DDATA", device=device_id))
-        dev.encoders = encoders
-        if old is not None:
-            dev.last = {n: s for n, s in old.last.items() if n in spec_map}
-        for s in samples:
-            if s.name in spec_map:
-                dev.last[s.name] = s
+        dev = self._grown(device_id, old, layout_of(specs))
+        dev.online, dev.not_good = True, set()
+        dev.data_topic = self._device_topic.format(kind="DDATA", device=device_id)
+        self._aliases.save()
+        slots = dev.layout.slots
+        dev.record([s for s in samples if s.name in slots])
         self._devices[device_id] = dev
         if not self.live:
             return []
@@ -298,13 +275,11 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        names = list(map(_name_of, samples))
-        if all(map(dev.specs.__contains__, names)):  # every value of a poll tick: no filtering
+        if all(map(dev.layout.slots.__contains__, map(_name_of, samples))):  # a poll tick's: no filtering
             known = samples
         else:
             known = self._known(device_id, dev, samples)
-            names = list(map(_name_of, known))
-        dev.last.update(zip(names, known, strict=True))
+        dev.record(known)
         if not (self.live and dev.online) or not known:
             return []
         return [self._data(dev.data_topic, dev, known)]
@@ -342,7 +317,7 @@ class SparkplugNode:
         dev = self._devices.get(device_id)
         if dev is None or not (self.live and dev.online):
             return []
-        specs = dev.specs
+        specs = dev.layout.slots
         if not all(map(specs.__contains__, map(_row_name, rows))):
             for row in rows:
                 if row[0] not in specs:
@@ -369,13 +344,21 @@ class SparkplugNode:
     def device_ids(self) -> list[str]:
         return list(self._devices)
 
+    def _grown(self, device_key: str, old: DeviceTable | None, layout: MetricLayout) -> DeviceTable:
+        """A table for `layout` (aliases assigned to its new names), keeping `old`'s last values and state."""
+        table = DeviceTable(layout, self._aliases.aliases(device_key, layout.names))
+        if old is not None:
+            table.record([s for s in old.last_samples() if s.name in layout.slots])
+            table.online, table.not_good, table.data_topic = old.online, old.not_good, old.data_topic
+        return table
+
     def _ddeath(self, device_id: str) -> Outgoing:
         ts = self._clock()
         p = Payload(timestamp=ts, seq=self._next_seq())
         return Outgoing(self._device_topic.format(kind="DDEATH", device=device_id), p.SerializeToString())
 
-    def _known(self, device_id: str, dev: _Device, samples: Sequence[Sample]) -> Sequence[Sample]:
-        specs = dev.specs
+    def _known(self, device_id: str, dev: DeviceTable, samples: Sequence[Sample]) -> Sequence[Sample]:
+        specs = dev.layout.slots
         if all(map(specs.__contains__, map(_name_of, samples))):
             return samples
         known = []
@@ -397,7 +380,7 @@ class SparkplugNode:
         self.encode_errors += 1
         log.warning("metric value cannot be encoded metric=%s error=%s", name, exc)
 
-    def _data(self, topic: str, dev: _Device, samples: Sequence[Sample]) -> Outgoing:
+    def _data(self, topic: str, dev: DeviceTable, samples: Sequence[Sample]) -> Outgoing:
         """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality).
 
         Written straight to bytes (edge.publish.ddata). The loop's first branch is the common metric (a
@@ -409,14 +392,15 @@ class SparkplugNode:
         append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
         double, double_field = dd.DOUBLE_FIELD, dd.VALUE_FIELDS[MetricType.DOUBLE]
-        encoders = dev.encoders
+        slots, alias_fields = dev.layout.slots, dev.alias_fields
         not_good = dev.not_good
         good = Quality.GOOD
         last_ts = -1
         stamp = b""
         double_size = 0
         for s in sorted(samples, key=_by_timestamp):
-            alias, value_field, mtype, _ = encoders[s.name]
+            position, value_field, mtype = slots[s.name]
+            alias = alias_fields[position]
             if s.timestamp_ms != last_ts:  # sorted: equal timestamps are adjacent
                 last_ts = s.timestamp_ms
                 stamp = dd.timestamp_field(last_ts)
@@ -440,7 +424,7 @@ class SparkplugNode:
         append(tail)
         return Outgoing(topic, b"".join(parts))
 
-    def _historical(self, dev: _Device, rows: Sequence[Sequence[Any]]) -> Outgoing:
+    def _historical(self, dev: DeviceTable, rows: Sequence[Sequence[Any]]) -> Outgoing:
         """One DATA message of replayed rows, every metric is_historical, in chronological order.
 
         A GOOD value whose metric was GOOD when last published live is alias + timestamp + is_historical +
@@ -450,13 +434,14 @@ class SparkplugNode:
         append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
         historical = dd.HISTORICAL
-        encoders = dev.encoders
+        slots, alias_fields = dev.layout.slots, dev.alias_fields
         not_good = set(dev.not_good)
         good = int(Quality.GOOD)
         last_ts = -1
         stamp = b""
         for name, value, _, ts, quality in sorted(rows, key=_row_timestamp):
-            alias, value_field, mtype, _ = encoders[name]
+            position, value_field, mtype = slots[name]
+            alias = alias_fields[position]
             if ts != last_ts:
                 last_ts = ts
                 stamp = dd.timestamp_field(ts) + historical
@@ -545,7 +530,7 @@ class SparkplugNode:
             return CommandIgnored(f"NCMD {name}: value false, nothing to do", unknown=False)
         if name is None:
             return CommandIgnored(f"NCMD metric {_describe(m)}: expected a known name or alias", unknown=True)
-        known = name in self._node.specs
+        known = name in self._node.layout.specs
         return CommandIgnored(f"NCMD {name}: node metric is not writable", unknown=not known)
 
     def _device_command(self, device_id: str, m: Payload.Metric) -> CommandEvent:
@@ -555,7 +540,7 @@ class SparkplugNode:
             return CommandIgnored(f"DCMD for unknown device {device_id!r}", unknown=True, device_id=device_id,
                                   metric=described, code="unknown_machine")
         name = self._resolve(device_id, m)
-        spec = dev.specs.get(name) if name is not None else None
+        spec = dev.layout.specs.get(name) if name is not None else None
         if name is None or spec is None:
             return CommandIgnored(f"DCMD {device_id}: metric {_describe(m)} not in its DBIRTH", unknown=True,
                                   device_id=device_id, metric=described, code="unknown_metric")

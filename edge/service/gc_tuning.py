@@ -37,6 +37,8 @@ import logging
 import time
 from collections.abc import Callable
 
+from edge.service import heap_trim
+
 log = logging.getLogger(__name__)
 
 YOUNG_THRESHOLD = 20_000  # allocations (net) between young collections; CPython's default is 700
@@ -59,12 +61,14 @@ def tune_collector() -> tuple[int, int, int]:
 def settle(recycle: bool = False) -> tuple[int, float]:
     """Collect, then freeze what survived: (objects frozen in all, seconds the loop was held).
 
-    `recycle` unfreezes first, so the collection examines every object (and frees frozen cycles)."""
+    `recycle` unfreezes first, so the collection examines every object (and frees frozen cycles). Start-up's
+    and a reload's garbage is gone then, so the C heap's free pages go back to the system too."""
     started = time.perf_counter()
     if recycle:
         gc.unfreeze()
     gc.collect()
     gc.freeze()
+    heap_trim.trim()
     return gc.get_freeze_count(), time.perf_counter() - started
 
 

@@ -121,3 +121,18 @@ def test_a_publish_response_is_asyncuas() -> None:
     theirs = ua.DataChangeNotification(MonitoredItems=[ua.MonitoredItemNotification(ClientHandle=h, Value=v)
                                                        for h, v in pairs])
     assert response(encoding.data_change_notification(pairs)) == response(theirs)
+
+
+def test_queued_notes_make_asyncuas_notification_whatever_their_form() -> None:
+    now = server_now()
+    pairs: list[tuple[int, ua.DataValue]] = [(index * 7919, data_value(s, now)) for index, s in enumerate(SAMPLES)]
+    pairs.append((5, ua.DataValue(ua.Variant([1, 2], ua.VariantType.Int32))))
+    theirs = extensionobject_to_binary(ua.DataChangeNotification(
+        MonitoredItems=[ua.MonitoredItemNotification(ClientHandle=h, Value=v) for h, v in pairs]))
+    encoded = [encoding.handle_prefix(h) + encoding.data_value_bytes(v) for h, v in pairs]
+    assert extensionobject_to_binary(encoding.data_change_of_notes([encoded[:3], encoded[3:]])) == theirs
+    mixed: list[list[object]] = [[encoded[0], pairs[1]], [ua.MonitoredItemNotification(ClientHandle=h, Value=v)
+                                                          for h, v in pairs[2:]]]
+    assert extensionobject_to_binary(encoding.data_change_of_notes(mixed)) == theirs
+    assert extensionobject_to_binary(encoding.data_change_of_notes([])) == \
+        extensionobject_to_binary(ua.DataChangeNotification())

@@ -167,3 +167,16 @@ async def test_machines_share_equal_static_attributes_and_change_them_apart(subs
     space.machine_online(second, SPECS, [], lambda spec: spec.name == "Macro/1")  # now writable there only
     assert attribute(second, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
     assert not attribute(first, ua.AttributeIds.AccessLevel).value.Value.Value & ua.AccessLevel.CurrentWrite.mask
+
+
+async def test_a_deleted_item_gets_nothing_and_is_forgotten(subscribed: Subscribed) -> None:
+    mid = await subscribed.monitor("Macro/1", 21, queue_size=5)
+    await subscribed.monitor("Macro/2", 22, queue_size=5)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/1", 1.0) + _values("Macro/2", 1.0))
+    assert await subscribed.publish() == [(21, 1.0, 0), (22, 1.0, 0)]
+    items = subscribed.subscription.monitored_item_srv
+    items.delete_monitored_items([mid])
+    await _feed(subscribed, _values("Macro/1", 2.0) + _values("Macro/2", 2.0))
+    assert await subscribed.publish() == [(22, 2.0, 0)]
+    assert [resolved[0] for resolved in items._resolved.values()] == [mid + 1]

@@ -64,3 +64,12 @@ def test_a_journal_entry_already_in_the_document_is_not_taken_twice(tmp_path: Pa
     aliases = AliasMap(store)
     assert (aliases.resolve(1), aliases.resolve(2)) == (("m1", "a"), ("m1", "b"))
     assert aliases.alias("m2", "c") == 3
+
+
+def test_bulk_aliases_assign_new_names_in_order_and_devices_alike_share_their_index() -> None:
+    aliases = AliasMap()
+    assert aliases.aliases("m1", ["a", "b", "a"]) == [1, 2, 1]
+    assert aliases.aliases("m2", ["a", "b"]) == [3, 4]
+    assert aliases.aliases("m1", ["c", "b"]) == [5, 2]
+    assert aliases.alias("m2", "a") == 3 and aliases.resolve(5) == ("m1", "c")
+    assert aliases._devices["m2"].index is aliases._known(("a", "b"), [9, 9]).index
