@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Callable, Sequence
 from operator import attrgetter
 from typing import Any, Protocol
@@ -40,7 +40,6 @@ _historical_of = attrgetter("historical")
 # A replay step fetches (and confirms with one barrier) about this many seconds of rows: at 12x the live rate
 # that is ~6 s of spooled ticks, so Sparkplug sends a device's ~6 rows of a step in one DDATA.
 FETCH_S = 0.5
-BARRIERS_IN_FLIGHT = 3  # steps sent and not yet confirmed, at most (a sent step keeps only its row ids)
 MERGE_ROWS = 16  # spool rows of one device in one replayed DDATA at most (~5 kB at 12 values a row)
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work at least, not each chunk
 MAX_SLICE_S = 0.1  # and after this much at most (what a live tick may wait for the replay)
@@ -144,9 +143,9 @@ class Replayer:
             sent_rows += len(step.done)
             return True
 
-        # Barriers in flight while the next steps go out: a PUBACK from a busy broker takes a good part of a
-        # step (~40 % of the replay's time at 1,000 machines when each step waited for its own).
-        inflight: deque[tuple[asyncio.Future[bool], _Step]] = deque()
+        # One barrier in flight while the next step goes out: a PUBACK from a busy broker takes a good part
+        # of a step (~40 % of the replay's time at 1,000 machines when each step waited for its own).
+        inflight: tuple[asyncio.Future[bool], _Step] | None = None
         after = 0  # the rows up to here are sent (and in flight or acked)
         try:
             while current():
@@ -155,8 +154,9 @@ class Replayer:
                 else:
                     entries = spool.oldest(fmt, fetch, target.replay_devices(), after=after)
                 if not entries:
-                    if inflight:
-                        if not await confirmed(*inflight.popleft()):
+                    if inflight is not None:
+                        pending, inflight = inflight, None
+                        if not await confirmed(*pending):
                             return
                         continue
                     if self._again:  # a device born meanwhile may have rows before `after`
@@ -173,15 +173,16 @@ class Replayer:
                 if not ok:
                     return
                 await pacer.pace(force=True)
-                while len(inflight) >= BARRIERS_IN_FLIGHT:
-                    if not await confirmed(*inflight.popleft()):
+                if inflight is not None:
+                    pending, inflight = inflight, None
+                    if not await confirmed(*pending):
                         return
                 if not current():
                     return
-                inflight.append((asyncio.ensure_future(link.barrier(conn)), step))
+                inflight = (asyncio.ensure_future(link.barrier(conn)), step)
         finally:
-            for barrier, _ in inflight:
-                barrier.cancel()  # the session ended: those steps' rows stay in the spool
+            if inflight is not None:
+                inflight[0].cancel()  # the session ended: its rows stay in the spool
         left = spool.pending(fmt)
         if delivered is not None and not left:
             delivered.forget()
