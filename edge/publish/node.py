@@ -11,8 +11,9 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
-from operator import attrgetter
+from dataclasses import dataclass
+from operator import attrgetter, itemgetter
+from typing import Any
 
 from edge.publish import ddata as dd
 from edge.publish import payload as pl
@@ -27,6 +28,8 @@ NAMESPACE = "spBv1.0"
 _FORBIDDEN_ID_CHARS = frozenset("+/#")
 _by_timestamp = attrgetter("timestamp_ms")
 _name_of = attrgetter("name")
+_row_name = itemgetter(0)
+_row_timestamp = itemgetter(3)
 
 
 def now_ms() -> int:
@@ -161,14 +164,16 @@ class SparkplugNode:
         return out
 
     def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
-        """The device values births carry (each online device's latest, or one device's), then any events
-        a rebirth held: what the next births() (or that device's DBIRTH) will send."""
+        """The device values births carry (each online device's latest, or one device's): what the next
+        births() (or that device's DBIRTH) will send, beside `held_events`."""
         if device_id is not None:
             dev = self._devices.get(device_id)
             return [(device_id, dev.last_samples())] if dev is not None and dev.online else []
-        out = [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
-        out.extend((d, list(events)) for d, events in self._held_events)
-        return out
+        return [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
+
+    def held_events(self) -> list[tuple[str, list[Sample]]]:
+        """The events a rebirth held, which the next births() sends after the DBIRTHs."""
+        return [(d, list(events)) for d, events in self._held_events]
 
     def _add_birth_metrics(self, p: Payload, device_key: str, dev: DeviceTable, ts: int) -> None:
         alias_of = self._aliases.alias  # assigned when the device was declared: a lookup here
@@ -301,15 +306,26 @@ class SparkplugNode:
         Only while live and the device is born; the device's current values (births) are not touched.
         Metrics no longer in the DBIRTH are counted as unknown and left out.
         """
+        return self.historical_rows(device_id, [[s.name, s.value, None, s.timestamp_ms, s.quality]
+                                                for s in samples])
+
+    def historical_rows(self, device_id: str, rows: Sequence[Sequence[Any]]) -> list[Outgoing]:
+        """historical_data for the spool's parsed rows [name, value, type, timestamp_ms, quality]
+        (edge.publish.spool_rows), encoded without building a Sample each (a 1,000-machine backlog is
+        ~150,000 values a second to replay). TypeError, ValueError or KeyError for a row that is not one
+        (a corrupt spool), with no seq taken."""
         dev = self._devices.get(device_id)
         if dev is None or not (self.live and dev.online):
             return []
-        known = self._known(device_id, dev, samples)
-        if not known:
+        specs = dev.layout.slots
+        if not all(map(specs.__contains__, map(_row_name, rows))):
+            for row in rows:
+                if row[0] not in specs:
+                    self._unknown(device_id, row[0])
+            rows = [row for row in rows if row[0] in specs]
+        if not rows:
             return []
-        marked = [s if s.historical else replace(s, historical=True) for s in known]
-        return [self._data(dev.data_topic, dev, marked,
-                           track_quality=False)]
+        return [self._historical(dev, rows)]
 
     def device_offline(self, device_id: str) -> list[Outgoing]:
         """DDEATH (with seq) if the device was born in this session; it keeps its aliases and values."""
@@ -364,14 +380,12 @@ class SparkplugNode:
         self.encode_errors += 1
         log.warning("metric value cannot be encoded metric=%s error=%s", name, exc)
 
-    def _data(self, topic: str, dev: DeviceTable, samples: Sequence[Sample], *,
-              track_quality: bool = True) -> Outgoing:
+    def _data(self, topic: str, dev: DeviceTable, samples: Sequence[Sample]) -> Outgoing:
         """One DATA message: metrics in chronological order, alias + timestamp + value (+ Quality).
 
         Written straight to bytes (edge.publish.ddata). The loop's first branch is the common metric (a
-        GOOD value that was GOOD last time, not historical); the rest goes through `_metric`.
-        `track_quality` False (historical replay): a non-GOOD quality is still stated on the metric, but
-        the live "last published quality" bookkeeping is left alone.
+        GOOD value that was GOOD last time, not historical); the rest goes through `_metric`. Replayed
+        samples have their own loop (`_historical`).
         """
         parts = [dd.payload_head(self._clock())]
         tail = dd.payload_tail(self._next_seq())
@@ -379,7 +393,7 @@ class SparkplugNode:
         headers = dd.SHORT_RECORD_HEADERS
         double, double_field = dd.DOUBLE_FIELD, dd.VALUE_FIELDS[MetricType.DOUBLE]
         slots, alias_fields = dev.layout.slots, dev.alias_fields
-        not_good = dev.not_good if track_quality else set(dev.not_good)
+        not_good = dev.not_good
         good = Quality.GOOD
         last_ts = -1
         stamp = b""
@@ -409,6 +423,40 @@ class SparkplugNode:
             append(self._metric(s, alias + stamp, value_field, mtype, not_good))
         append(tail)
         return Outgoing(topic, b"".join(parts))
+
+    def _historical(self, dev: DeviceTable, rows: Sequence[Sequence[Any]]) -> Outgoing:
+        """One DATA message of replayed rows, every metric is_historical, in chronological order.
+
+        A GOOD value whose metric was GOOD when last published live is alias + timestamp + is_historical +
+        value; the rest goes through `_metric` (as a Sample), on a copy of the live quality bookkeeping (a
+        replay leaves it alone)."""
+        parts = [dd.payload_head(self._clock())]
+        append = parts.append
+        headers = dd.SHORT_RECORD_HEADERS
+        historical = dd.HISTORICAL
+        slots, alias_fields = dev.layout.slots, dev.alias_fields
+        not_good = set(dev.not_good)
+        good = int(Quality.GOOD)
+        last_ts = -1
+        stamp = b""
+        for name, value, _, ts, quality in sorted(rows, key=_row_timestamp):
+            position, value_field, mtype = slots[name]
+            alias = alias_fields[position]
+            if ts != last_ts:
+                last_ts = ts
+                stamp = dd.timestamp_field(ts) + historical
+            if quality == good and value is not None and (not not_good or name not in not_good) \
+                    and (data := value_field(value)) is not None:
+                body = alias + stamp + data
+                try:
+                    append(headers[len(body)] + body)
+                except IndexError:  # a body of 128 bytes or more: a longer length varint
+                    append(dd.metric_record(body))
+                continue
+            sample = Sample(name, value, mtype, ts, Quality(quality), True)
+            append(self._metric(sample, alias + stamp[:-len(historical)], value_field, mtype, not_good))
+        append(dd.payload_tail(self._next_seq()))  # last: a row that raises above takes no seq
+        return Outgoing(dev.data_topic, b"".join(parts))
 
     def _metric(self, s: Sample, head: bytes, value_field: dd.ValueField, mtype: MetricType,
                 not_good: set[str]) -> bytes:

@@ -120,7 +120,7 @@ class SparkplugSession:
         births = self.node.device_online(device_id, specs, samples)
         if self.link.send(self.link.conn, births) and births:
             for born_id, values in self.node.birth_samples(device_id):
-                self.delivered.record(born_id, values)
+                self.delivered.record_birth(born_id, values)
         if self.node.live:
             self.replay.kick()  # rows this device left in the spool
 
@@ -306,13 +306,15 @@ class SparkplugSession:
 
     def _send_births(self) -> None:
         """NBIRTH and the DBIRTHs; what they carry is recorded so the replay does not repeat it."""
-        carried = self.node.birth_samples()
+        carried, events = self.node.birth_samples(), self.node.held_events()
         births = self._births()
         for m in births:
             if m.topic == self.node.nbirth_topic:
                 self.guard.sent_birth(m.payload)  # its echo on our subscription is ours
         if self.link.send(self.link.conn, births):
-            for device_id, samples in carried:
+            for device_id, values in carried:
+                self.delivered.record_birth(device_id, values)
+            for device_id, samples in events:
                 self.delivered.record(device_id, samples)
 
     def cancel_rebirth(self) -> None:
@@ -347,3 +349,6 @@ class SparkplugSession:
 
     def historical(self, entry: Any, samples: Sequence[Sample]) -> list[Outgoing]:
         return self.node.historical_data(entry.device_id, samples)
+
+    def historical_rows(self, entry: Any, rows: Sequence[Sequence[Any]]) -> list[Outgoing]:
+        return self.node.historical_rows(entry.device_id, rows)

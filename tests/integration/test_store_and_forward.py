@@ -28,7 +28,7 @@ from edge.publish import payload as pl
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.json_topics import GATEWAY, OFFLINE
 from edge.publish.sparkplug_b_pb2 import Payload
-from edge.publish.spool import decode_samples
+from edge.publish.spool_rows import decode_samples
 from edge.samples import MetricType, Sample
 from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet

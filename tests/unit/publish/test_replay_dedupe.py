@@ -62,3 +62,49 @@ def test_an_acknowledged_rows_samples_are_forgotten() -> None:
 def test_a_value_key_is_the_value_as_the_spool_writes_it(value: object) -> None:
     """The fast spellings of scalars equal json's, so a value and its copy through the spool share a key."""
     assert value_key(value) == json.dumps(value, separators=(",", ":"), sort_keys=True, default=str)
+
+
+def test_a_replayed_row_is_skipped_whole_until_acknowledged() -> None:
+    d = DeliveredValues()
+    d.record_row(7)
+    assert d.has_row(7) and not d.has_row(8)
+    d.connection_lost()
+    assert not d.has_row(7), "sent on a connection that was lost: it may not have arrived"
+    d.record_row(7)
+    d.proven(d.mark())
+    d.connection_lost()
+    assert d.has_row(7), "proven by a barrier: skipped on the next connection too"
+    d.forget_rows([7])
+    assert not d.has_row(7) and len(d) == 0
+
+
+def test_timestamps_never_recorded_pass_without_a_key_and_the_index_follows_the_record() -> None:
+    d = DeliveredValues()
+    d.record("m1", [s(1)])
+    tick = [s(2), s(3)]
+    assert d.fresh("m1", tick) is tick, "no timestamp in common: the samples themselves, no key built"
+    assert d.fresh("m1", [s(1), s(2)]) == [s(2)]
+    d.connection_lost()
+    assert d.fresh("m1", [s(1)]) == [s(1)], "the unproven record is gone, with its timestamps"
+    d.record("m1", [s(4)])
+    d.proven(d.mark())
+    d.connection_lost()
+    assert d.fresh("m1", [s(4), s(5)]) == [s(5)], "proven values stay indexed across connections"
+    d.forget()
+    assert d.fresh("m1", [s(4)]) == [s(4)] and d.skipped == 2
+
+
+def test_birth_values_are_kept_by_reference_and_follow_the_connection() -> None:
+    d = DeliveredValues()
+    d.record_birth("m1", [s(1), s(2, name="Macro/501")])
+    assert d.fresh("m1", [s(1), s(1, value=2.5), s(3)]) == [s(1, value=2.5), s(3)]
+    assert d.fresh("m1", [s(2)]) == [s(2)], "the birth carried Macro/501 at 2, not Macro/500"
+    d.connection_lost()
+    assert d.fresh("m1", [s(1)]) == [s(1)], "a birth not proven may not have arrived"
+    d.record_birth("m1", [s(1)])
+    d.proven(d.mark())
+    d.record_birth("m1", [s(4)])  # a rebirth after the barrier: not proven by it
+    d.connection_lost()
+    assert d.fresh("m1", [s(1), s(4)]) == [s(4)] and len(d) == 0, "births are not keys"
+    d.forget()
+    assert d.fresh("m1", [s(1)]) == [s(1)]

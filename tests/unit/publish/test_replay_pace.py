@@ -18,7 +18,7 @@ from edge.publish import replay
 from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.node import Outgoing
 from edge.publish.replay import Replayer
-from edge.publish.spool import SpoolEntry
+from edge.publish.spool_rows import SpoolEntry
 from edge.publish.tasks import BackgroundTasks
 from edge.samples import MetricType, Quality, Sample
 
@@ -91,13 +91,13 @@ class Target:
 class Spool:
     def __init__(self) -> None:
         sample = Sample("x", 1, MetricType.INT32, 0, Quality.GOOD, False)
-        self.rows = [SpoolEntry(i, "sparkplug", "m1", "data", [sample]) for i in range(ROWS)]
+        self.rows = [SpoolEntry(i, "sparkplug", "m1", "data", [sample]) for i in range(1, ROWS + 1)]
 
     def hold(self, *args: Any) -> None:
         raise AssertionError("nothing is held during this replay")
 
-    def oldest(self, fmt: str, limit: int, devices: Any = None) -> list[SpoolEntry]:
-        return self.rows[:limit]
+    def oldest(self, fmt: str, limit: int, devices: Any = None, after: int = 0) -> list[SpoolEntry]:
+        return [r for r in self.rows if r.id > after][:limit]
 
     def ack(self, ids: Sequence[int]) -> None:
         acked = set(ids)
@@ -136,9 +136,9 @@ def test_replay_holds_its_rate_across_steps_whose_barrier_is_slow(monkeypatch: p
 def test_replay_behind_its_pace_yields_per_slice_of_work_not_per_chunk(monkeypatch: pytest.MonkeyPatch) -> None:
     """A large fleet's live ticks make every yield cost an event-loop turn far longer than a chunk's work
     (1,000 machines: ~70 rows/s when yielding after each chunk of 50). Behind its pace (each turn here
-    costs 30 ms, the rows are due 1 ms apart), the replay yields once per SLICE_S of work and at each step's
-    barrier, not after every chunk."""
-    clock = Clock(turn_s=0.03, row_s=0.0002)
+    costs 100 ms, the rows are due 1 ms apart: after its first sleep the replay never catches up), the
+    replay yields once per SLICE_S of work and at each step's barrier, not after every chunk."""
+    clock = Clock(turn_s=0.1, row_s=0.0002)
     monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
     monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
     link, spool = asyncio.run(_replay(clock))
@@ -147,3 +147,18 @@ def test_replay_behind_its_pace_yields_per_slice_of_work_not_per_chunk(monkeypat
     slices = math.ceil(ROWS * clock.row_s / replay.SLICE_S)
     assert clock.yields <= per_step * link.barriers + slices + 1
     assert clock.yields < ROWS // link.policy.replay_batch + per_step * link.barriers  # per chunk: 40
+
+
+def test_behind_its_pace_the_replay_takes_a_slice_as_long_as_the_live_turn(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When a live turn takes 100 ms, a 20 ms slice gives the replay a sixth of the loop (1,000 machines:
+    5x the live rate against the 12x asked for); a slice as long as the turn (up to MAX_SLICE_S) gives it
+    about half: a yield per MAX_SLICE_S of work, not per SLICE_S."""
+    clock = Clock(turn_s=replay.MAX_SLICE_S, row_s=0.0003)
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    link, spool = asyncio.run(_replay(clock))
+    assert spool.rows == [] and link.sent == ROWS
+    per_step = 2  # the step's final pace and the barrier's wait for its PUBACK
+    work = ROWS * clock.row_s
+    assert clock.yields <= per_step * link.barriers + math.ceil(work / replay.MAX_SLICE_S) + 2
+    assert clock.yields < math.ceil(work / replay.SLICE_S)

@@ -17,7 +17,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.publish.forwarding import ForwardingPolicy, HeldBatch, Outbox
-from edge.publish.spool import DiskSpool, decode_samples, encode_samples, open_spool
+from edge.publish.spool import DiskSpool, open_spool
+from edge.publish.spool_rows import decode_samples, encode_samples
 from edge.samples import MetricType, Quality, Sample
 
 
@@ -157,6 +158,7 @@ values = st.one_of(st.none(), st.booleans(), st.integers(-(2**63), 2**64 - 1), s
 def test_encode_decode_round_trip_property(rows: list[tuple[str, object, MetricType, int, Quality]]) -> None:
     samples = [Sample(*row) for row in rows]
     assert decode_samples(encode_samples(samples)) == samples
+    assert decode_samples(encode_samples(samples), historical=True) == [Sample(*row, True) for row in rows]
 
 
 @given(st.binary(max_size=200))
@@ -238,3 +240,32 @@ async def test_on_a_loop_the_rows_of_one_turn_are_committed_together_when_it_end
     again = DiskSpool(path)
     assert again.pending() == 202
     again.close()
+
+
+def test_lazy_entries_give_the_stored_rows_and_the_same_samples(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    held = [sample(1), Sample("Mode", "AUTO", MetricType.STRING, 7, Quality.STALE)]
+    spool.hold("sparkplug", "m1", "data", held)
+    (entry,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert entry.rows() == [[s.name, s.value, s.type.value, s.timestamp_ms, int(s.quality)] for s in held]
+    assert entry.samples == [Sample(s.name, s.value, s.type, s.timestamp_ms, s.quality, True) for s in held]
+    assert entry == spool.oldest("sparkplug", 10)[0], "lazy or not, the same entry"
+    spool.close()
+
+
+def test_a_lazy_row_not_shaped_as_written_has_no_rows_and_a_reader_may_drop_it(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    spool.hold("sparkplug", "m1", "data", [sample(1)])
+    db = spool._conn()
+    db.execute("UPDATE spool SET body = ?", (b'[["Macro/500", 1.0, "Double", 5.0, 192, "extra"]]',))
+    (six,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert six.rows() is None, "six columns: not a row"
+    with pytest.raises(ValueError, match="expected a JSON list"):
+        six.samples  # noqa: B018 (the property reads the body)
+    spool.unreadable(six.id, ValueError("six columns"))
+    assert spool.dropped == 1 and spool.pending() == 0
+    spool.hold("sparkplug", "m1", "data", [sample(2)])
+    db.execute("UPDATE spool SET body = ?", (b'[["Macro/500", 2.0, "Double", 5.0, 192]]',))
+    (lenient,) = spool.oldest("sparkplug", 10, lazy=True)
+    assert lenient.rows() is not None and lenient.samples[0].timestamp_ms == 5, "a float timestamp: read leniently"
+    spool.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -65,7 +66,8 @@ def test_spool_on_a_full_1mb_disk_drops_oldest_counts_every_sample_and_logs_once
         left = samples_left(spool)
         assert spool.dropped + left == spool.held, "every sample is either waiting or counted as dropped"
         newest = spool.oldest("sparkplug", 1_000_000)[-1]
-        assert newest.samples == batch(2999), "the newest rows are kept (oldest first is dropped)"
+        assert newest.samples == [replace(s, historical=True) for s in batch(2999)], \
+            "the newest rows are kept (oldest first is dropped), handed out historical"
         starts = [r for r in caplog.records if "spool full" in r.getMessage()]
         assert len(starts) == 1, f"one log line per episode, got {len(starts)}"
         spool.close()
