@@ -44,7 +44,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         "writes": lambda: writes.run(quick=args.quick),
         "plantpage": lambda: plant_page.run(quick=args.quick),
         "opcua": lambda: opcua.run(quick=args.quick, machines=sizes[0] if sizes else None, duration_s=args.duration,
-                                   repeats=args.repeat),
+                                   repeats=args.repeat, diagnose=args.diagnose,
+                                   modes=tuple(args.modes.split(",")) if args.modes else opcua.MODES),
         "reload": lambda: reload.run(sizes=sizes, period_s=float(args.period) if args.period else None,
                                      duration_s=args.duration, quick=args.quick),
         "outage": lambda: outage.run(machines=sizes[0] if sizes else None,
@@ -75,9 +76,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="fleet: run the daemon under tracemalloc and write its live allocations by module "
                              "at the end of the window into FILE (the largest size's first run; CPU figures "
                              "of that run include tracemalloc's cost); summarise with python -m bench.memory_summary")
+    parser.add_argument("--modes", default="", metavar="MODES",
+                        help=f"opcua: modes to run, comma separated, off among them ({', '.join(opcua.ALL_MODES)}; "
+                             "default off,thread,loop)")
     parser.add_argument("--diagnose", action="store_true",
-                        help="fleet: run the daemon with bench.latency_daemon's probes (loop lag, GC pauses, grid "
-                             "slots, stamp to outputs) and add their figures to each row")
+                        help="fleet and opcua: run the daemon with bench.latency_daemon's probes (loop lag, GC "
+                             "pauses, grid slots, stamp to outputs) and add their figures to each row")
     parser.add_argument("--same-plan", action="store_true",
                         help="fleet: servo loads every 10th and counters every 100th tick at any period (as at 10 Hz), "
                              "so CPU per cycle compares the same reads across periods")

@@ -40,6 +40,10 @@ from bench.workload import STAMP_MACRO
 from tests.helpers import Mosquitto, free_port, mosquitto_binary
 
 MODES = ("off", "thread", "loop")
+# "idle": the server on the daemon's loop with its address space built but no client; "ballast": the server
+# off, the daemon holding an inert heap as large as the server's (bench.opcua_ballast): what the heap alone
+# costs (asked for with --modes, not run by default)
+ALL_MODES = (*MODES, "idle", "ballast")
 NODE_MODULES = REPO / ".node" / "node_modules"
 USER, PASSWORD = "bench", "bench-password"
 EXTRA_CPU_TARGET_PCT = 30.0
@@ -47,8 +51,9 @@ CHANGE_P99_TARGET_MS = 100.0
 
 
 def opcua_section(mode: str, port: int, password_file: Path) -> str:
-    if mode == "off":
+    if mode in ("off", "ballast"):
         return ""
+    mode = "loop" if mode == "idle" else mode
     return (f"opcua:\n  enabled: true\n  host: 127.0.0.1\n  port: {port}\n  threaded: {str(mode == 'thread').lower()}\n"
             f"  users:\n    - {{username: {USER}, password_file: {password_file}}}\n")
 
@@ -98,9 +103,10 @@ class ClientProcess:
 
 
 def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
-             profile_to: Path | None = None) -> dict[str, Any]:
+             profile_to: Path | None = None, diagnose: bool = False) -> dict[str, Any]:
     """One measurement; every process it starts is stopped before it returns. `profile_to`: the daemon runs
-    under pyinstrument and its report is written there (its CPU figures then include the profiler's)."""
+    under pyinstrument and its report is written there (its CPU figures then include the profiler's).
+    `diagnose`: under bench.latency_daemon's probes (GC pauses by generation, the loop thread's own CPU)."""
     binary = mosquitto_binary()
     if binary is None:
         raise RuntimeError("mosquitto is not installed (make bench runs scripts/ensure-mosquitto.sh)")
@@ -122,14 +128,16 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, 0.1)
                           + opcua_section(mode, opcua_port, password))
-        daemon = DaemonProcess(config, workdir / "daemon.log", profile_to=profile_to)
+        diagnosis = workdir / "diagnosis.json" if diagnose else None
+        daemon = DaemonProcess(config, workdir / "daemon.log", profile_to=profile_to, diagnose_to=diagnosis,
+                               module="bench.opcua_ballast" if mode == "ballast" else None)
         sub, proc = subscriber, daemon.proc
         wait_until(lambda: len(sub.births) >= machines or proc.poll() is not None, 30 + machines * 0.2,
                    f"DBIRTH of {machines} machines")
         if proc.poll() is not None:
             raise RuntimeError(f"daemon exited with {proc.returncode}; see {workdir / 'daemon.log'}")
         subscribed: dict[str, Any] = {}
-        if mode != "off":
+        if mode not in ("off", "idle", "ballast"):
             started = time.monotonic()
             client = ClientProcess(f"opc.tcp://127.0.0.1:{opcua_port}/focas-edge", workdir / "client-pki",
                                    workdir / "client.log")
@@ -138,7 +146,8 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
         time.sleep(warmup_s)
         if client is not None:
             client.answer("start")
-        measured = _window(FleetOptions(machines, duration_s=duration_s), daemon, sims, subscriber, broker_process)
+        measured = _window(FleetOptions(machines, duration_s=duration_s), daemon, sims, subscriber, broker_process,
+                           diagnosis)
         if client is not None:
             seen = client.answer("report")
             measured["client_items"] = subscribed.get("items", 0)
@@ -182,39 +191,59 @@ def burst(client: ClientProcess, subscriber: LatencySubscriber) -> dict[str, Any
 
 BURST_SETTLE_S = 6.0
 
-KEYS = ("cpu_us_per_cycle", "gateway_cores", "rss_mb", "achieved_pct", "overruns", "change_p99_ms",
-        "client_items", "subscribe_s", "client_notifications_per_s", "client_change_p50_ms", "client_change_p99_ms",
-        "client_sample_p50_ms", "client_sample_p99_ms", "burst_s", "burst_mqtt_change_p99_ms",
-        "burst_mqtt_change_max_ms", "burst_overruns", "steal_pct")
+
+def diagnosis_summary(run_: dict[str, Any], machines: int) -> str:
+    """The probes' figures per machine-cycle: the loop thread's CPU (the rest is other threads'), GC pauses."""
+    d, cycles = run_["diagnosis"], run_["cycles_per_s"] * run_["window_s"]
+    gcs = ", ".join(f"{g} {d['gc'][g].get('n', 0)}x {d['gc'][g].get('sum_ms', 0.0) / cycles * 1000:.1f} us"
+                    for g in ("gen0", "gen1", "gen2"))
+    return (f"loop thread {d['loop_thread_ran_s'] / cycles * 1e6:.0f} us/cycle; GC {gcs}; tracked "
+            f"{d['gc_tracked_objects']:,}, frozen {d['gc_frozen_objects']:,}")
+
+KEYS = ("cpu_us_per_cycle", "sys_us_per_cycle", "wakeups_per_cycle", "gateway_cores", "rss_mb", "achieved_pct",
+        "overruns", "change_p99_ms", "client_items", "subscribe_s", "client_notifications_per_s",
+        "client_change_p50_ms", "client_change_p99_ms", "client_sample_p50_ms", "client_sample_p99_ms", "burst_s",
+        "burst_mqtt_change_p99_ms", "burst_mqtt_change_max_ms", "burst_overruns", "steal_pct")
 
 
 def run(quick: bool = False, machines: int | None = None, duration_s: float | None = None,
-        repeats: int = 1) -> Result:
+        repeats: int = 1, modes: tuple[str, ...] = MODES, diagnose: bool = False) -> Result:
+    unknown = sorted(set(modes) - set(ALL_MODES))
+    if unknown or "off" not in modes:
+        raise ValueError(f"opcua modes must include off and be among {', '.join(ALL_MODES)}; got {', '.join(modes)}")
     machines = machines or (20 if quick else 100)
     duration = duration_s or (5.0 if quick else 20.0)
     command = f"python -m bench opcua{' --quick' if quick else ''} --sizes {machines} --duration {duration:g} " \
-              f"--repeat {repeats}"
+              f"--repeat {repeats}{'' if modes == MODES else ' --modes ' + ','.join(modes)}" \
+              f"{' --diagnose' if diagnose else ''}"
     result = Result("opcua", command)
     rows: dict[str, dict[str, Any]] = {}
     for _ in range(repeats):
-        for mode in MODES:  # interleaved, so a slow phase of the host hits every mode alike
-            run_ = run_mode(mode, machines, duration, 1.0 if quick else 3.0)
+        for mode in modes:  # interleaved, so a slow phase of the host hits every mode alike
+            run_ = run_mode(mode, machines, duration, 1.0 if quick else 3.0, diagnose=diagnose)
             print(f"  opcua {mode:<6} N={machines}: {run_['cpu_us_per_cycle']:.0f} us/cycle "
-                  f"({run_['gateway_cores']:.2f} cores), client change p99 "
+                  f"({run_['gateway_cores']:.2f} cores, sys {run_['sys_us_per_cycle']:.0f} us, "
+                  f"{run_['wakeups_per_cycle']:.2f} switches/cycle), client change p99 "
                   f"{run_.get('client_change_p99_ms', float('nan')):.0f} ms", flush=True)
+            if "diagnosis" in run_:
+                print(f"  opcua {mode:<6} {diagnosis_summary(run_, machines)}", flush=True)
             rows.setdefault(mode, {"mode": mode, "machines": machines, "runs": []})["runs"].append(run_)
     for row in rows.values():
         runs = row.pop("runs")
+        if "diagnosis" in runs[0]:
+            row["diagnosis"] = runs[0]["diagnosis"]
         for key in KEYS:
             values = [r[key] for r in runs if key in r]
             row[key] = statistics.median(values) if values else None
         result.rows.append(row)
     base = rows["off"]["cpu_us_per_cycle"]
-    for mode in ("thread", "loop"):
+    for mode in (m for m in ("thread", "loop", "idle", "ballast") if m in rows):
         extra = 100 * (rows[mode]["cpu_us_per_cycle"] / base - 1)
         rows[mode]["extra_cpu_pct"] = extra
         result.checks.append(Check(f"extra gateway CPU, server in its {mode}", extra, EXTRA_CPU_TARGET_PCT, "<=",
                                    " %"))
+        if mode in ("idle", "ballast"):
+            continue
         result.checks.append(Check(f"change-to-client p99, server in its {mode}", rows[mode]["client_change_p99_ms"],
                                    CHANGE_P99_TARGET_MS, "<=", " ms"))
     result.notes.append("one client (node-opcua, own process, Basic256Sha256 Sign&Encrypt, user+password) "

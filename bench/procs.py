@@ -77,13 +77,15 @@ class DaemonProcess:
     probes of bench.latency_daemon); its CPU is measurable."""
 
     def __init__(self, config: Path, log: Path, profile_to: Path | None = None,
-                 tracemalloc_to: Path | None = None, diagnose_to: Path | None = None) -> None:
+                 tracemalloc_to: Path | None = None, diagnose_to: Path | None = None,
+                 module: str | None = None) -> None:
+        """`module`: with `diagnose_to`, another runner taking the same arguments as bench.latency_daemon."""
         if profile_to is not None:
             command = [sys.executable, "-m", "bench.profiled_daemon", str(config), str(profile_to)]
         elif tracemalloc_to is not None:
             command = [sys.executable, "-m", "bench.memory_daemon", str(config), str(tracemalloc_to)]
         elif diagnose_to is not None:
-            command = [sys.executable, "-m", "bench.latency_daemon", str(config), str(diagnose_to)]
+            command = [sys.executable, "-m", module or "bench.latency_daemon", str(config), str(diagnose_to)]
         else:
             command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
         self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()
