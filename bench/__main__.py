@@ -33,7 +33,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         result = fleet.run(quick=args.quick, sizes=sizes, repeats=args.repeat, duration_s=args.duration,
                            spy_to=spy, py_spy=args.py_spy, periods=periods, warmup_s=args.warmup,
                            tracemalloc_to=Path(args.tracemalloc) if args.tracemalloc else None,
-                           diagnose=args.diagnose, same_plan=args.same_plan)
+                           diagnose=args.diagnose, same_plan=args.same_plan,
+                           same_clock=args.same_clock)
         return result
 
     return {
@@ -85,6 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--same-plan", action="store_true",
                         help="fleet: servo loads every 10th and counters every 100th tick at any period (as at 10 Hz), "
                              "so CPU per cycle compares the same reads across periods")
+    parser.add_argument("--same-clock", action="store_true",
+                        help="fleet: every simulated CNC clock is this host's (an NTP-synced plant), not each its own "
+                             "offset and phase within the second (bench.clocks)")
     parser.add_argument("--py-spy", default="py-spy", help="the py-spy executable")
     parser.add_argument("--results", type=Path, default=None, help="directory for JSON results")
     args = parser.parse_args(argv)

@@ -4,7 +4,9 @@ Per N: the daemon's CPU seconds (user+sys) per machine-cycle, its RSS, achieved 
 plan (N machines / the poll period, 100 ms unless --period), poll overruns, change-to-broker latency
 measured by a subscriber, and the CNC timestamp error (stamp minus the simulator's clock when it answered,
 from a macro that reads as that clock). A cycle is one data PDU the simulators answered (the collector sends
-one per tick); the clock-only reads between ticks are counted apart (per machine per minute).
+one per tick); the clock-only reads between ticks are counted apart (per machine per minute). Each simulated
+CNC clock runs its own offset off this host's (bench.clocks: as hand-set clocks do), unless --same-clock
+(every CNC clock this host's: an NTP-synced plant, the rig before 2026-11-26).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any, Protocol
 
 import psutil
 
+from bench.clocks import device_clock_offset
 from bench.procs import DaemonProcess, SimProcess
 from bench.report import Check, Result, percentile
 from bench.subscriber import LatencySubscriber
@@ -55,6 +58,7 @@ class FleetOptions:
     tracemalloc_to: Path | None = None  # live Python allocations by module at the window's end (JSON)
     diagnose: bool = False  # the daemon under bench.latency_daemon: loop lag, GC pauses, grid slots in the row
     same_plan: bool = False  # loads and counters every 10th and 100th tick at any period (as at 10 Hz)
+    same_clock: bool = False  # every CNC clock this host's (not each its own offset: bench.clocks)
 
 
 class Endpoint(Protocol):
@@ -92,16 +96,17 @@ def run_fleet(options: FleetOptions) -> dict[str, Any]:
         broker.start()
         broker_process = psutil.Process(broker.proc.pid) if broker.proc else None
         subscriber = LatencySubscriber(broker.host, broker.port, GROUP, f"Macro/{STAMP_MACRO}",
-                                       f"Macro/{CLOCK_MACRO}")
+                                       f"Macro/{CLOCK_MACRO}",
+                                       cnc_offset=None if options.same_clock else device_clock_offset)
         n = options.machines
-        sims = start_fleet_sims(n, options.period_s)
+        sims = start_fleet_sims(n, options.period_s, spread_clocks=not options.same_clock)
         ports = [port for sim in sims for port in sim.ports]
         config = workdir / "edge.yaml"
         config.write_text(config_text(broker, workdir / "state", ports, options.period_s, options.same_plan))
         started = time.time()
         diagnosis = workdir / "diagnosis.json" if options.diagnose else None
         daemon = DaemonProcess(config, workdir / "daemon.log", options.profile_to, options.tracemalloc_to,
-                               diagnosis)
+                               diagnosis, spread_clocks=not options.same_clock)
         born_s = wait_for_births(subscriber, daemon, n, started, workdir)
         # Start-up: the daemon's CPU until the last birth, and how long its loop thread ran and waited for a CPU
         born_cpu_s, (born_ran_s, born_waited_s) = daemon.cpu_seconds(), daemon.loop_schedstat()
@@ -148,8 +153,9 @@ def dump_allocations(daemon: DaemonProcess, out: Path) -> None:
     time.sleep(0.5)  # the writer's last bytes
 
 
-def start_fleet_sims(machines: int, period_s: float = 0.1) -> list[SimProcess]:
-    """The fleet's simulated CNCs, spread over processes (each stamps the latency macro).
+def start_fleet_sims(machines: int, period_s: float = 0.1, spread_clocks: bool = False) -> list[SimProcess]:
+    """The fleet's simulated CNCs, spread over processes (each stamps the latency macro); with `spread_clocks`
+    each CNC clock its own offset (bench.clocks), else every one this host's.
 
     A process takes MACHINES_PER_SIM machines, or at a slow period as many as make SIM_REQUESTS_PER_S (at most
     MAX_MACHINES_PER_SIM): an idle simulator process wakes cold for every request, so twenty of them answering
@@ -161,7 +167,8 @@ def start_fleet_sims(machines: int, period_s: float = 0.1) -> list[SimProcess]:
     sims: list[SimProcess] = []
     try:
         for first in range(0, machines, size):
-            sims.append(SimProcess(min(size, machines - first), stamp_macro=STAMP_MACRO, clock_macro=CLOCK_MACRO))
+            sims.append(SimProcess(min(size, machines - first), stamp_macro=STAMP_MACRO, clock_macro=CLOCK_MACRO,
+                                   spread_clocks_from=first if spread_clocks else None))
     except BaseException:
         for sim in sims:
             sim.stop()
@@ -333,7 +340,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, duration_s: float | None = None,
         spy_to: Path | None = None, py_spy: str = "py-spy", periods: list[float] | None = None,
         warmup_s: float | None = None, tracemalloc_to: Path | None = None, diagnose: bool = False,
-        same_plan: bool = False) -> Result:
+        same_plan: bool = False, same_clock: bool = False) -> Result:
     sizes = sizes or ([5, 20] if quick else [10, 50, 100, 200])
     periods = periods or [0.1]
     duration = duration_s or (5.0 if quick else 20.0)
@@ -342,9 +349,9 @@ def run(quick: bool = False, sizes: list[int] | None = None, repeats: int = 2, d
     command = (f"python -m bench fleet{' --quick' if quick else ''} --sizes {','.join(map(str, sizes))} "
                f"--period {','.join(f'{p:g}' for p in periods)} --repeat {repeats} --duration {duration:g}"
                f"{f' --warmup {warmup:g}' if warmup_s is not None else ''}{' --diagnose' if diagnose else ''}"
-               f"{' --same-plan' if same_plan else ''}")
+               f"{' --same-plan' if same_plan else ''}{' --same-clock' if same_clock else ''}")
     result = Result("fleet", command)
-    extra = {"diagnose": diagnose, "same_plan": same_plan}
+    extra = {"diagnose": diagnose, "same_plan": same_plan, "same_clock": same_clock}
     for period in periods:
         _run_period(result, period, sizes, repeats, duration, warmup, spy_to, py_spy, tracemalloc_to, extra)
     return result
@@ -361,7 +368,8 @@ def _run_period(result: Result, period: float, sizes: list[int], repeats: int, d
                                        spy_to=spy_to if first else None, py_spy=py_spy,
                                        tracemalloc_to=tracemalloc_to if first else None,
                                        diagnose=bool(extra and extra["diagnose"]),
-                                       same_plan=bool(extra and extra["same_plan"])))
+                                       same_plan=bool(extra and extra["same_plan"]),
+                                       same_clock=bool(extra and extra["same_clock"])))
                 for first in first_of_biggest]
         by_size[n] = summarise(runs)
         result.rows.append(by_size[n])

@@ -6,6 +6,8 @@ grid's timers fire and how many machines each slot wakes, and how long a tick ta
 changes reaching the publisher. SIGUSR1 starts a fresh window (the measuring window of `bench fleet
 --diagnose`); SIGUSR2 writes the window's figures to OUT.json. The probes cost little (one 10 ms timer,
 a clock read per tick and per collection), so the run's other figures stay close to the plain daemon's.
+With --spread-clocks (after OUT.json) each machine's CNC clock is bench.clocks' offset off this host's, and the
+truth the probes compare with is that machine's own clock.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from bench.clocks import device_clock_offset
 from edge.collect import poller as poller_module
 from edge.collect.tickgrid import TickGrid
 from edge.samples import Sample
@@ -45,8 +48,9 @@ def _quantiles(values: Sequence[float]) -> dict[str, float]:
 class Window:
     """What the probes saw since the last reset."""
 
-    def __init__(self) -> None:
+    def __init__(self, spread_clocks: bool = False) -> None:
         self.daemon: Daemon | None = None  # its pollers' clocks, at report time
+        self.spread_clocks = spread_clocks  # each CNC clock its own (bench.clocks), or all this host's
         self.reset()
 
     def reset(self) -> None:
@@ -82,21 +86,22 @@ class Window:
         }
 
 
-def _true_offset() -> float:
-    """The simulators' CNC clock (offset 0: real time) minus this host's monotonic clock."""
-    return time.time() - time.monotonic()
+def _true_offset(window: Window, device_id: str) -> float:
+    """The simulated CNC clock of `device_id` minus this host's monotonic clock."""
+    cnc_ahead = device_clock_offset(device_id) if window.spread_clocks else 0.0
+    return time.time() + cnc_ahead - time.monotonic()
 
 
 def _clock_figures(window: Window) -> dict[str, Any]:
     """Whether stamp error is the clock offset: its error per tick, and each machine's offset state now."""
-    pollers = list(window.daemon.pollers.values()) if window.daemon is not None else []
-    now, truth = time.monotonic(), _true_offset()
+    pollers = list(window.daemon.pollers.items()) if window.daemon is not None else []
+    now = time.monotonic()
     errors, uncertainties, probes = [], [], []
-    for poller in pollers:
+    for device_id, poller in pollers:
         tracker = poller.clock
         if tracker.offset_s is None:
             continue
-        errors.append(abs(tracker.offset_s - truth))
+        errors.append(abs(tracker.offset_s - _true_offset(window, device_id)))
         uncertainties.append(tracker.uncertainty_at(now) or 0.0)
         probes.append(float(poller._clock.probes.sent))
     return {"tick_offset_error_abs": _quantiles([abs(e) for e in window.offset_error]),
@@ -159,7 +164,8 @@ def install(window: Window, daemon: Daemon) -> None:
 
     async def timed_data(device_id: str, samples: Sequence[Sample]) -> None:
         if samples:
-            window.publish_lag.append(time.time() - samples[0].timestamp_ms / 1000)
+            cnc_ahead = device_clock_offset(device_id) if window.spread_clocks else 0.0
+            window.publish_lag.append(time.time() + cnc_ahead - samples[0].timestamp_ms / 1000)
         await outputs_data(device_id, samples)
 
     daemon.outputs.device_data = timed_data  # type: ignore[method-assign]
@@ -171,7 +177,7 @@ def install(window: Window, daemon: Daemon) -> None:
         window.tick.append(time.monotonic() - started)
         offset = self.clock.offset_s
         if offset is not None and not self.clock.use_gateway_time:
-            window.offset_error.append(offset - _true_offset())
+            window.offset_error.append(offset - _true_offset(window, self.machine_id))
         return result
 
     poller_module.MachinePoller._tick = timed_tick  # type: ignore[method-assign]
@@ -189,7 +195,7 @@ async def lag_probe(window: Window) -> None:
 
 def main() -> int:
     config, out = Path(sys.argv[1]), Path(sys.argv[2])
-    window = Window()
+    window = Window(spread_clocks="--spread-clocks" in sys.argv[3:])
     signal.signal(signal.SIGUSR1, lambda signum, frame: window.reset())
     signal.signal(signal.SIGUSR2, lambda signum, frame: out.write_text(json.dumps(window.report(), indent=1)))
     configure: Callable[[Daemon], None] = lambda daemon: install(window, daemon)  # noqa: E731

@@ -29,7 +29,8 @@ class SimProcess:
     """`python -m bench.simproc` as a child: ports once ready, stats on request."""
 
     def __init__(self, machines: int, *, latency: float = 0.0, stamp_macro: int = 0, clock_macro: int = 0,
-                 fill_macros: str = "", packed: bool = False, timeout: float = 60.0) -> None:
+                 fill_macros: str = "", packed: bool = False, spread_clocks_from: int | None = None,
+                 timeout: float = 60.0) -> None:
         command = [sys.executable, "-m", "bench.simproc", "--machines", str(machines), "--latency", str(latency)]
         if stamp_macro:
             command += ["--stamp-macro", str(stamp_macro)]
@@ -39,6 +40,8 @@ class SimProcess:
             command += ["--fill-macros", fill_macros]
         if packed:
             command.append("--packed")
+        if spread_clocks_from is not None:
+            command += ["--spread-clocks", str(spread_clocks_from)]
         self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                      cwd=REPO, env=python_env())
         first = self._line(timeout)
@@ -78,14 +81,16 @@ class DaemonProcess:
 
     def __init__(self, config: Path, log: Path, profile_to: Path | None = None,
                  tracemalloc_to: Path | None = None, diagnose_to: Path | None = None,
-                 module: str | None = None) -> None:
-        """`module`: with `diagnose_to`, another runner taking the same arguments as bench.latency_daemon."""
+                 module: str | None = None, spread_clocks: bool = False) -> None:
+        """`module`: with `diagnose_to`, another runner taking the same arguments as bench.latency_daemon;
+        `spread_clocks`: tell bench.latency_daemon each CNC clock has its own offset (bench.clocks)."""
         if profile_to is not None:
             command = [sys.executable, "-m", "bench.profiled_daemon", str(config), str(profile_to)]
         elif tracemalloc_to is not None:
             command = [sys.executable, "-m", "bench.memory_daemon", str(config), str(tracemalloc_to)]
         elif diagnose_to is not None:
             command = [sys.executable, "-m", module or "bench.latency_daemon", str(config), str(diagnose_to)]
+            command += ["--spread-clocks"] if spread_clocks else []
         else:
             command = [sys.executable, "-m", "edge", "run", "--config", str(config)]
         self._log = open(log, "ab")  # noqa: SIM115 - closed in stop()

@@ -1,7 +1,7 @@
 """A simulated fleet in its own process, driven over stdin/stdout by a benchmark.
 
     python -m bench.simproc --machines 50 [--latency 0.002] [--stamp-macro 509] [--clock-macro 508]
-                            [--fill-macros 500-599]
+                            [--fill-macros 500-599] [--spread-clocks FIRST]
 
 Prints one JSON line ``{"ports": [...]}`` when every machine listens, then answers each ``stats`` line
 on stdin with a JSON line (data PDUs and subpackets served, this process's CPU seconds); ``stop`` or
@@ -9,7 +9,9 @@ end of input closes the fleet. With --stamp-macro each machine sets that macro t
 time (seconds modulo 1000, millisecond resolution) at random moments, so a subscriber can tell how
 long a change took to reach the broker: latency = receipt time - value (mod 1000). With --clock-macro that
 macro reads as the CNC's clock at the moment it answers, so a published timestamp minus its value is the
-timestamp's error (edge.sim.state_clock.clock_macro_error).
+timestamp's error (edge.sim.state_clock.clock_macro_error). With --spread-clocks FIRST machine i's CNC clock
+runs bench.clocks.cnc_clock_offset(FIRST + i) off this host's (FIRST: its index in the whole fleet); without it
+every CNC clock is this host's.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import random
 import sys
 import time
 
+from bench.clocks import cnc_clock_offset
 from edge.sim import CycleSpec, Fleet, MachineSpec
 
 STAMP_MODULO = 1000.0
@@ -76,8 +79,9 @@ async def serve(args: argparse.Namespace) -> None:
     numbers = range(int(first), int(last or first) + 1) if first else range(0)
     macros: dict[int, float | None] = {n: float(n) + 0.5 for n in numbers}
     specs = [MachineSpec(profile=args.profile, macros=macros, faults={"latency": args.latency},
-                         cycle=CycleSpec(alarm_every=0), clock_macro=args.clock_macro or None)
-             for _ in range(args.machines)]
+                         cycle=CycleSpec(alarm_every=0), clock_macro=args.clock_macro or None,
+                         clock_offset=0.0 if args.spread_clocks < 0 else cnc_clock_offset(args.spread_clocks + i))
+             for i in range(args.machines)]
     fleet = Fleet(specs, base_port=0, packed_base_port=0 if args.packed else None)
     await fleet.start()
     gc.collect()
@@ -117,6 +121,9 @@ def main() -> None:
     parser.add_argument("--packed", action="store_true", help="also serve the packed surface")
     parser.add_argument("--fill-macros", default="",
                         help="give macros FIRST-LAST a value (pyfocas cannot read vacant ones)")
+    parser.add_argument("--spread-clocks", type=int, default=-1, metavar="FIRST",
+                        help="give each CNC clock its own offset (bench.clocks), FIRST being the fleet index of the "
+                             "first machine (default: every CNC clock is this host's)")
     asyncio.run(serve(parser.parse_args()))
 
 

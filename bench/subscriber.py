@@ -7,7 +7,8 @@ are taken, after the measuring window, so the subscriber does not take CPU from 
 rare and decoded as they come. For each DDATA it
 notes the receipt time; the stamp macro's value is the simulator's wall-clock time of the change, so
 receipt minus value is change-to-broker latency (both clocks are this host's). The first metric's
-timestamp (the CNC time the gateway stamped the tick with; clock offset 0) gives read-to-broker latency.
+timestamp (the CNC time the gateway stamped the tick with, less that CNC clock's offset from this host's:
+`cnc_offset`, 0 unless the fleet's clocks are spread) gives read-to-broker latency.
 The clock macro's value is the simulator's clock when it answered the tick's request, so its timestamp
 minus its value is the stamp's error.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 import paho.mqtt.client as paho
@@ -33,8 +35,9 @@ class LatencySubscriber:
     """Subscribes to one Sparkplug group; `recording` decides whether latencies are kept."""
 
     def __init__(self, host: str, port: int, group: str, stamp_metric: str, clock_metric: str = "",
-                 track_seq: bool = False) -> None:
+                 track_seq: bool = False, cnc_offset: Callable[[str], float] | None = None) -> None:
         self.group = group
+        self.cnc_offset = cnc_offset  # device -> seconds its CNC clock runs ahead of this host's
         self.track_seq = track_seq  # check the node's seq on every message (costs a decode per message)
         self.seq_gaps: list[tuple[int, int]] = []  # (expected, got) where a message of the node went missing
         self._last_seq: int | None = None
@@ -131,7 +134,8 @@ class LatencySubscriber:
         metrics = payload.metrics
         if not metrics:
             return
-        sample = received - metrics[0].timestamp / 1000
+        read_at = metrics[0].timestamp / 1000 - (self.cnc_offset(device) if self.cnc_offset else 0.0)  # host clock
+        sample = received - read_at
         published = payload.timestamp / 1000  # the gateway's clock when it encoded the message
         stamp_alias = self._stamp_alias.get(device)
         clock_alias = self._clock_alias.get(device)
@@ -145,7 +149,7 @@ class LatencySubscriber:
             self.values += len(metrics)
             self.messages += 1
             self.sample_latency_s.append(sample)
-            self.in_gateway_s.append(published - metrics[0].timestamp / 1000)
+            self.in_gateway_s.append(published - read_at)
             self.to_subscriber_s.append(received - published)
             if change is not None:
                 self.change_latency_s.append(change)
