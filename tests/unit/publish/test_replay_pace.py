@@ -126,7 +126,7 @@ def test_replay_holds_its_rate_across_steps_whose_barrier_is_slow(monkeypatch: p
     link, spool = asyncio.run(_replay(clock))
     assert spool.rows == [] and link.sent == ROWS
     steps = link.barriers
-    assert steps == ROWS // int(RATE * replay.FETCH_S)
+    assert steps == ROWS // int(RATE * replay.FETCH_EACH_S)  # the test's target sends each row alone
     # Paced per step, every barrier came on top: 1.0 s + 10 x 0.05 s. Paced over the whole replay, the
     # barriers eat into the sleeps: only the last one is left over.
     assert clock.now <= ROWS / RATE + BARRIER_S + 1e-6
@@ -154,6 +154,7 @@ def test_behind_its_pace_the_replay_takes_a_slice_as_long_as_the_live_turn(monke
     5x the live rate against the 12x asked for); a slice as long as the turn (up to MAX_SLICE_S) gives it
     about half: a yield per MAX_SLICE_S of work, not per SLICE_S."""
     clock = Clock(turn_s=replay.MAX_SLICE_S, row_s=0.0003)
+    monkeypatch.setattr(replay, "FETCH_EACH_S", replay.FETCH_S)  # steps of Sparkplug's length: few step yields
     monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
     monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
     link, spool = asyncio.run(_replay(clock))
