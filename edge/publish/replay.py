@@ -153,10 +153,8 @@ class Replayer:
         after = 0  # the rows up to here are sent (and in flight or acked)
         try:
             while current():
-                if self._from_rows is not None:
-                    entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=True, after=after)
-                else:
-                    entries = spool.oldest(fmt, fetch, target.replay_devices(), after=after)
+                entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
+                                       after=after)
                 if not entries:
                     if inflight is not None:
                         pending, inflight = inflight, None

@@ -96,7 +96,8 @@ class Spool:
     def hold(self, *args: Any) -> None:
         raise AssertionError("nothing is held during this replay")
 
-    def oldest(self, fmt: str, limit: int, devices: Any = None, after: int = 0) -> list[SpoolEntry]:
+    def oldest(self, fmt: str, limit: int, devices: Any = None, lazy: bool = False,
+               after: int = 0) -> list[SpoolEntry]:
         return [r for r in self.rows if r.id > after][:limit]
 
     def ack(self, ids: Sequence[int]) -> None:
