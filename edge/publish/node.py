@@ -275,10 +275,7 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        if all(map(dev.layout.slots.__contains__, map(_name_of, samples))):  # a poll tick's: no filtering
-            known = samples
-        else:
-            known = self._known(device_id, dev, samples)
+        known = self._known(device_id, dev, samples)
         dev.record(known)
         if not (self.live and dev.online) or not known:
             return []
