@@ -164,7 +164,8 @@ class MachineState:
     def pin_moment(self) -> None:
         """Read the cycle at this one instant until unpin_moment: a server answering one request pins it, so
         the request's dozen reads replay the cycle once, not once each (the answer is the state of one moment,
-        as a CNC gives it). Writes and the CNC clock keep reading the injected clock."""
+        as a CNC gives it). The CNC clock keeps reading the injected clock; a write answered meanwhile replays the
+        cycle to the pinned moment, microseconds behind."""
         now = self._time()
         for state in self._paths.values():
             state._moment = now
@@ -177,7 +178,9 @@ class MachineState:
         """Replay the cycle up to `now` (default: the pinned moment, else the injected clock): parts, alarms
         raised and cleared."""
         with self._lock:
-            real = (self._time() if self._moment is None else self._moment) if now is None else now
+            real = now
+            if real is None:
+                real = self._time() if self._moment is None else self._moment
             if self._held_at is not None:  # held: the cycle stands where feed hold stopped it
                 real = min(real, self._held_at)
             target = real - self._t0 - self._held_s + self._phase
