@@ -540,7 +540,6 @@ class Schedule:
         self._next: dict[Group, float] = {}
         self._static_pending = True
         self.skipped = 0
-        self._combinations = _COMBINATIONS
 
     def start(self, now: float) -> None:
         """A new connection: static data and every group are due at once."""
@@ -563,9 +562,9 @@ class Schedule:
                 self.skipped += missed
                 following += missed * period
             self._next[group] = following
-        groups = self._combinations.get(mask)
+        groups = _COMBINATIONS.get(mask)
         if groups is None:
-            groups = self._combinations[mask] = frozenset(g for g, bit in _GROUP_BITS.items() if mask & bit)
+            groups = _COMBINATIONS[mask] = frozenset(g for g, bit in _GROUP_BITS.items() if mask & bit)
         return groups
 
     def next_due(self) -> float | None:

@@ -25,7 +25,7 @@ class StartGate:
         self.slots = slots
         self._free = asyncio.Semaphore(slots)
         self.starting = 0  # machines between connect and DBIRTH now
-        self.peak = 0  # the most at once (the status, and tests, read it)
+        self.peak = 0  # the most at once (tests read it)
 
     async def enter(self) -> None:
         await self._free.acquire()
