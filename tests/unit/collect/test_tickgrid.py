@@ -69,17 +69,18 @@ def test_the_step_must_be_positive() -> None:
 async def test_a_step_changed_while_machines_sleep_keeps_their_slot_and_applies_to_the_next_sleep() -> None:
     grid = TickGrid(0.04)
     loop = asyncio.get_running_loop()
-    due = loop.time() + 0.001
+    # Slots half a second ahead: a busy host between the two sleepers must not let the first one fire.
+    due = loop.time() + 0.5
     old_slot = grid.slot_time(due)
     sleeper = asyncio.create_task(grid.sleep_until(due))
     await asyncio.sleep(0)
     grid.step_s = 0.03  # a reload: slot (0.03, k) must not be taken for the armed (0.04, k)
-    new_due = loop.time() + 0.001
+    new_due = loop.time() + 0.5
     newcomer = asyncio.create_task(grid.sleep_until(new_due))
     await asyncio.sleep(0)
     assert grid.pending_slots == 2
-    await asyncio.wait_for(sleeper, 1.0)
+    await asyncio.wait_for(sleeper, 5.0)
     assert loop.time() >= old_slot
-    await asyncio.wait_for(newcomer, 1.0)
+    await asyncio.wait_for(newcomer, 5.0)
     assert loop.time() >= math.ceil(new_due / 0.03) * 0.03 == grid.slot_time(new_due)
     assert grid.pending_slots == 0
