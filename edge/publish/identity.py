@@ -4,7 +4,8 @@ Two gateways with the same group/edge node id (a cloned config) fight without a 
 derived from the ids, the broker closes one session each time the other connects and both reconnect in
 under a second (a birth per connect: 105 NBIRTH in 40 s seen); with distinct client ids both stay up and
 hosts see two interleaved seq streams and ask for rebirths. The sessions feed what they see here:
-- another session's NBIRTH for our id (a payload we did not send), or an NDEATH with a bdSeq we never used;
+- another session's NBIRTH for our id (a payload we did not send, or a second copy of one we did), or an
+  NDEATH with a bdSeq we never used;
 - the broker taking our session: MQTT 5 reason "Session taken over", or (3.1.1, no reason) several sessions
   in a row closed by the broker soon after their CONNACK, each time taking us straight back (edge.publish.mqtt
   reports a loss only then: a broker restart refuses the first reconnect) and not for a missed keepalive.
@@ -64,7 +65,9 @@ class IdentityGuard:
         self._last_evidence: float | None = None
         self._current: Conflict | None = None
         self._short_losses: dict[str, int] = {}  # per client id (Sparkplug and JSON connections)
-        self._own_births: deque[bytes] = deque(maxlen=8)  # NBIRTH payloads we sent (their echo is ours)
+        # NBIRTH payloads we sent whose echo has not come back yet: each echoes once (QoS 0, one subscription),
+        # so a second copy is another session's birth, byte-equal when a clone births in the same millisecond.
+        self._unechoed_births: deque[bytes] = deque(maxlen=8)
         self._own_bdseqs: deque[int] = deque(maxlen=16)  # bdSeqs our CONNECTs carried
 
     # -- the verdict -----------------------------------------------------------------------------------
@@ -95,14 +98,15 @@ class IdentityGuard:
     # -- what the sessions report ----------------------------------------------------------------------
 
     def sent_birth(self, payload: bytes) -> None:
-        self._own_births.append(payload)
+        self._unechoed_births.append(payload)
 
     def used_bdseq(self, bdseq: int) -> None:
         self._own_bdseqs.append(bdseq)
 
     def nbirth_seen(self, payload: bytes, bdseq: int | None, ours: int | None) -> None:
         """An NBIRTH on our own topic: ours echoed back, or another session's."""
-        if payload in self._own_births:
+        if payload in self._unechoed_births:
+            self._unechoed_births.remove(payload)  # our echo, once
             return
         self._evidence(f"an NBIRTH for this id from another session (its bdSeq {bdseq}, ours {ours})")
 

@@ -61,6 +61,15 @@ async def start_pair(tmp_path: Path, texts: tuple[str, str], http_ports: tuple[i
     return daemons
 
 
+async def wait_for_conflict(daemons: list[DaemonProcess]) -> None:
+    """Until one of them logs the ERROR; on a timeout the failure carries both logs' tails."""
+    try:
+        await async_wait_for(lambda: any(errors(d) for d in daemons), 30, message="an identity conflict ERROR")
+    except AssertionError as exc:
+        tails = "\n".join(f"--- {d.config.name}\n" + "\n".join(d.output().splitlines()[-25:]) for d in daemons)
+        raise AssertionError(f"{exc}\n{tails}") from None
+
+
 async def test_a_taken_over_client_id_is_one_error_and_a_backoff_not_a_birth_storm(
         mosquitto: Mosquitto, tmp_path: Path) -> None:
     observer = Observer(mosquitto, topics=(NBIRTH,))
@@ -72,8 +81,7 @@ async def test_a_taken_over_client_id_is_one_error_and_a_backoff_not_a_birth_sto
             daemons = await start_pair(tmp_path, (texts[0], texts[1]), http_ports)
             # The gateway whose session is taken first says so at once and backs off; the other sees its
             # session end once a minute and says so within hold_s (edge.publish.identity).
-            await async_wait_for(lambda: any(errors(d) for d in daemons), 30,
-                                 message="an identity conflict ERROR")
+            await wait_for_conflict(daemons)
             index = next(i for i, d in enumerate(daemons) if errors(d))
             http_port = http_ports[index]
 
@@ -115,8 +123,7 @@ async def test_another_sessions_nbirth_for_our_id_is_an_identity_conflict(
             texts = tuple(config(mosquitto, tmp_path / name, fleet[0].port, "3.1.1", f"  client_id: gw-{name}")
                           for name in ("a", "b"))
             daemons = await start_pair(tmp_path, (texts[0], texts[1]), (free_port(), free_port()))
-            await async_wait_for(lambda: any(errors(d) for d in daemons), 30,
-                                 message="an identity conflict ERROR")
+            await wait_for_conflict(daemons)
             line = next(line for d in daemons for line in errors(d))
             assert "Sparkplug id plant/gw" in line and "an NBIRTH for this id from another session" in line, line
     finally:

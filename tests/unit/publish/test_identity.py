@@ -42,6 +42,27 @@ def test_our_own_nbirth_echo_and_our_own_ndeaths_are_not_a_conflict(guard: Ident
     assert guard.reconnect_floor_s() == 0.0 and guard.rebirth_interval_s(1.0) == 1.0
 
 
+def test_a_clones_byte_equal_nbirth_is_a_conflict_though_it_matches_ours(
+        guard: IdentityGuard, caplog: pytest.LogCaptureFixture) -> None:
+    """Two clones with new state_dirs born in the same millisecond send the same bytes: the second copy tells."""
+    birth = b"NBIRTH bdSeq 0 at ms 1700000000000"
+    guard.sent_birth(birth)
+    guard.nbirth_seen(birth, 0, 0)  # our echo
+    assert not guard.active
+    guard.nbirth_seen(birth, 0, 0)  # the clone's, byte for byte
+    (line,) = errors(caplog)
+    assert "an NBIRTH for this id from another session" in line and guard.count == 1
+
+
+def test_each_of_our_births_echoes_once_even_when_two_are_equal(guard: IdentityGuard) -> None:
+    """A rebirth within the same millisecond repeats the bytes: two sent, two echoes, no conflict."""
+    guard.sent_birth(b"same")
+    guard.sent_birth(b"same")
+    guard.nbirth_seen(b"same", 0, 0)
+    guard.nbirth_seen(b"same", 0, 0)
+    assert not guard.active and guard.count == 0
+
+
 def test_another_sessions_nbirth_is_one_error_then_backoff_until_it_stops(
         guard: IdentityGuard, clock: Clock, caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.INFO)
