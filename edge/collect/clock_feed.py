@@ -15,10 +15,13 @@ from zoneinfo import ZoneInfo
 
 from edge.collect import plan as pl
 from edge.collect.clock import MAX_DRIFT_RATE, ClockTracker, cnc_to_utc_seconds
-from edge.collect.clock_probe import ClockProbes
+from edge.collect.clock_probe import ClockProbes, ProbeCalendar
 from edge.samples import Quality, Sample
 
 log = logging.getLogger(__name__)
+
+# One per process, which is one gateway: its machines' narrowing reads share the bins (clock_probe).
+FLEET_CALENDAR = ProbeCalendar()
 
 _NOTHING = object()  # no reading yet (compares unequal to any answer)
 
@@ -31,7 +34,7 @@ class ClockFeed:
     def __init__(self, machine_id: str, zone: ZoneInfo, max_skew_s: float) -> None:
         self.machine_id = machine_id
         self.tracker = ClockTracker(zone, max_skew_s, drift_rate=MAX_DRIFT_RATE)
-        self.probes = ClockProbes(self.tracker)
+        self.probes = ClockProbes(self.tracker, calendar=FLEET_CALENDAR)
         self.news = False  # a clock-only read (or a slew) moved the clock: the next tick publishes it
         self._reading: object = _NOTHING  # the CNC clock value of the last answer (unchanged within a second)
         self._epoch = 0.0  # that value as epoch seconds

@@ -26,15 +26,23 @@ request, no data) timed by the tracker:
   second or more is caught by any tick.
 
 A budget caps it all: at most BURST reads in a row and PER_MINUTE per minute sustained (a token bucket),
-so a thousand machines stay cheap whatever their clocks do. At steady state a machine takes about two
-such reads a minute (docs/performance.md has the measured rate). No read is placed at the CNC's
-midnight: the native clock read is date then time (two subpackets), which could straddle the day.
+so a thousand machines stay cheap whatever their clocks do. And a calendar shared by the gateway's machines
+(ProbeCalendar) caps how many narrowing reads aim at one few-millisecond bin: CNC clocks synchronised by NTP
+all flip at the same instant, so without it a fleet's narrowing reads arrive together and each one's round
+trip (the width its reading leaves) is the crowd's, not the machine's (docs/performance.md, the clock at
+1,000 x 1 Hz). A narrowing read need not aim at the exact middle: anywhere within a quarter of the
+uncertainty from it still halves the interval nearly as well, so the crowd spreads over that window (wide
+at start-up, when every machine narrows) or, when it is full, waits for the same phase a second later. At
+steady state a machine takes about two such reads a minute (docs/performance.md has the measured rate).
+No read is placed at the CNC's midnight: the native clock read is date then time (two subpackets), which
+could straddle the day.
 """
 
 from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Iterable, Iterator
 from datetime import datetime
 
 from edge.collect.clock import ClockTracker
@@ -50,6 +58,65 @@ FRUITLESS_LIMIT = 2  # unhelpful narrowing reads in a row before narrowing rests
 REOPEN_SHARE = 0.5  # narrowing resumes when the usual round trip falls to this share of the one it rested at
 REPLAN_S = 1.0  # a plan is recomputed at least this often (the uncertainty grows as readings age)
 MIDNIGHT_GUARD_S = 2  # seconds either side of the CNC's midnight with no read
+BIN_S = 0.005  # the calendar's bins: narrowing reads aiming within one such slice of gateway time
+PER_BIN = 8  # narrowing reads a bin takes (a read costs the loop ~0.1 ms: 8 keep a bin's queue under 1 ms)
+AIM_SHARE = 0.25  # a narrowing read aims within this share of the uncertainty from the interval's middle
+LOOK_AHEAD_S = 8  # seconds searched for a bin with room; beyond, the least booked one is taken
+
+
+class ProbeCalendar:
+    """Narrowing reads booked by the gateway moment they aim at, in BIN_S bins of PER_BIN reads; one per
+    gateway (edge.collect.clock_feed.FLEET_CALENDAR). Each ClockProbes holds at most one booking for a read
+    not yet done, given back when it is replanned; a read done keeps its place, and bins in the past are
+    forgotten."""
+
+    def __init__(self, per_bin: int = PER_BIN, bin_s: float = BIN_S) -> None:
+        self.per_bin = per_bin
+        self.bin_s = bin_s
+        self._booked: dict[int, int] = {}
+        self._purged_at = -math.inf
+
+    def booked(self, moment: float) -> int:
+        return self._booked.get(math.floor(moment / self.bin_s), 0)
+
+    def book(self, moment: float) -> int:
+        key = math.floor(moment / self.bin_s)
+        self._booked[key] = self._booked.get(key, 0) + 1
+        if moment - self._purged_at > 1.0:
+            self._purge(moment)
+        return key
+
+    def release(self, key: int) -> None:
+        left = self._booked.get(key, 0) - 1
+        if left > 0:
+            self._booked[key] = left
+        else:
+            self._booked.pop(key, None)
+
+    def _purge(self, moment: float) -> None:
+        """Bookings more than a few seconds old (a machine removed before its read) are dropped."""
+        self._purged_at = moment
+        oldest = math.floor((moment - 2 * LOOK_AHEAD_S) / self.bin_s)
+        for key in [k for k in self._booked if k < oldest]:
+            del self._booked[key]
+
+    def slot(self, flips: Iterable[float], spread: float) -> float:
+        """The gateway moment to aim at: within `spread` of one of `flips` (predicted flips, earliest first),
+        nearest the earliest flip with room; the least booked moment when none has."""
+        bin_s = self.bin_s
+        steps = int(spread / bin_s)
+        offsets = [0.0]
+        for step in range(1, steps + 1):
+            offsets += (step * bin_s, -step * bin_s)
+        least, least_count = math.nan, math.inf
+        for flip in flips:
+            for offset in offsets:
+                count = self.booked(flip + offset)
+                if count < self.per_bin:
+                    return flip + offset
+                if count < least_count:
+                    least, least_count = flip + offset, count
+        return least
 
 
 class ProbeKind(enum.Enum):
@@ -61,8 +128,10 @@ class ClockProbes:
     """Plans the clock-only reads of one machine: `send_at(now)`, then `done(now)` after each read."""
 
     def __init__(self, tracker: ClockTracker, goal_s: float = GOAL_S, verify_every_s: float = VERIFY_EVERY_S,
-                 burst: int = BURST, per_minute: float = PER_MINUTE) -> None:
+                 burst: int = BURST, per_minute: float = PER_MINUTE, calendar: ProbeCalendar | None = None) -> None:
         self.tracker = tracker
+        self.calendar = calendar  # None: narrowing reads aim at the middle, uncapped (a lone machine)
+        self._booking: int | None = None  # the calendar bin this machine's planned read holds
         self.goal_s = goal_s
         self.verify_every_s = verify_every_s
         self.burst = burst
@@ -95,6 +164,7 @@ class ClockProbes:
         if revision == self._revision and now < self._valid_until:
             return self._send
         self._revision = revision
+        self._unbook()
         self._send = self._plan(now, max(half_rtt_s, 0.0))
         self._valid_until = min(self._send, now + REPLAN_S)
         return self._send
@@ -124,7 +194,29 @@ class ClockProbes:
             self._kind, earliest = ProbeKind.VERIFY, verified + self.verify_every_s
             aim = self._side * (uncertainty + half_rtt + VERIFY_MARGIN_S)
         earliest = max(earliest, now + LEAD_S + half_rtt, self._budget_ready())
+        if self._kind is ProbeKind.NARROW and self.calendar is not None:
+            return self._booked_narrowing(earliest, offset, uncertainty) - half_rtt
         return self._flip_after(earliest, offset, aim) - half_rtt
+
+    def _booked_narrowing(self, earliest: float, offset: float, uncertainty: float) -> float:
+        """A narrowing read's aim, booked in the gateway's calendar (see ProbeCalendar)."""
+        assert self.calendar is not None
+        spread = AIM_SHARE * uncertainty
+        moment = self.calendar.slot(self._flips(earliest + spread, offset), spread)
+        self._booking = self.calendar.book(moment)
+        return moment
+
+    def _flips(self, earliest: float, offset: float) -> Iterator[float]:
+        """The predicted CNC second flips from `earliest` on, LOOK_AHEAD_S of them (computed as asked)."""
+        flip = self._flip_after(earliest, offset, 0.0)
+        for _ in range(LOOK_AHEAD_S):
+            yield flip
+            flip = self._flip_after(flip + 0.5, offset, 0.0)
+
+    def _unbook(self) -> None:
+        if self._booking is not None and self.calendar is not None:
+            self.calendar.release(self._booking)
+        self._booking = None
 
     def _flip_after(self, earliest: float, offset: float, aim: float) -> float:
         """The first gateway moment at or after `earliest` that is `aim` seconds from a predicted CNC second
@@ -154,6 +246,7 @@ class ClockProbes:
     # ---- after a read --------------------------------------------------------------------------------
     def done(self, now: float) -> None:
         """A planned read was done (and its reading, if any, observed by the tracker): book it."""
+        self._booking = None  # the read took its place in that bin: it stays booked until the bin is past
         self._refill(now)
         self._tokens -= 1.0
         self.sent += 1
