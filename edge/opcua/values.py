@@ -89,8 +89,8 @@ class LazyDataValue(SharedDataValue):
 
     A monitored value is encoded (the notification's bytes) and kept as the item's last value, to compare
     the next one with (`same_reading`); its Variant and datetimes are only needed when a client reads the
-    node or an item on asyncua's own path (a deadband) looks into it. Building them for every change was
-    half of a monitored value's cost and two more objects for the collector to sweep.
+    node or an item on asyncua's own path (a deadband) looks into it. Building them for every change took
+    about 1 of the 2.5 us a value cost to build, and left two more objects for the collector to sweep.
     """
 
     __slots__ = ("raw", "server", "stamp", "vtype")
