@@ -5,7 +5,9 @@ single timings wander; this one isolates what the server does for each changed v
 subscribed to (DataValue built, the monitored item told, the notification queued, the Publish response
 encoded) and reports process CPU per notification, so an A/B of two branches is a counted comparison.
 
-    python -m bench.opcua_notify [--machines 100] [--metrics 74] [--ticks 200] [--profile]
+    python -m bench.opcua_notify [--machines 100] [--metrics 74] [--ticks 200] [--profile] [--no-client]
+
+--no-client: the same value changes with nobody subscribed (the server's cost of a value no one reads).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ class _Request:
         self.requesthdr = ua.RequestHeader()
 
 
-async def measure(machines: int, metrics: int, ticks: int, profile: bool) -> dict[str, Any]:
+async def measure(machines: int, metrics: int, ticks: int, profile: bool, client: bool = True) -> dict[str, Any]:
     settings = OpcUaSettings(state_dir=Path(tempfile.mkdtemp(prefix="opcua-notify-")), host="127.0.0.1", port=0,
                              security=("None",), allow_anonymous=True)
     gateway = GatewayServer(settings)
@@ -73,6 +75,8 @@ async def measure(machines: int, metrics: int, ticks: int, profile: bool) -> dic
                 item.MonitoringMode = ua.MonitoringMode.Reporting
                 item.RequestedParameters = ua.MonitoringParameters(ClientHandle=m * metrics + handle, QueueSize=10)
                 items.append(item)
+        if not client:
+            items.clear()  # the subscription stays, with nothing to report
         created_items = await subscription.monitored_item_srv.create_monitored_items(
             ua.CreateMonitoredItemsParameters(SubscriptionId=created.SubscriptionId, ItemsToCreate=items))
         assert all(result.StatusCode.is_good() for result in created_items)
@@ -114,8 +118,9 @@ def main() -> None:
     parser.add_argument("--metrics", type=int, default=74)
     parser.add_argument("--ticks", type=int, default=200)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--no-client", action="store_true", help="no monitored item: values nobody reads")
     args = parser.parse_args()
-    print(asyncio.run(measure(args.machines, args.metrics, args.ticks, args.profile)))
+    print(asyncio.run(measure(args.machines, args.metrics, args.ticks, args.profile, not args.no_client)))
 
 
 if __name__ == "__main__":

@@ -6,8 +6,10 @@ Kept apart from both sides so publish never depends on focas and collect never o
 from __future__ import annotations
 
 import enum
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 
 
 class MetricType(enum.Enum):
@@ -92,3 +94,13 @@ def _sample_builder() -> Callable[..., Sample]:
 
 
 new_sample = _sample_builder()
+
+
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+@functools.lru_cache(maxsize=4096)
+def utc_datetime(epoch_ms: int) -> datetime:
+    """The aware datetime of an epoch-ms time (a Sample's timestamp), exact (no float), cached: the samples
+    of one poll share their timestamp, so a batch converts it once."""
+    return _EPOCH + timedelta(milliseconds=epoch_ms)

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from datetime import UTC, datetime, timedelta
+from datetime import datetime
 from zoneinfo import ZoneInfo
 
 DEFAULT_WINDOW_S = 300.0
@@ -68,10 +68,6 @@ def cnc_to_utc_seconds(cnc_wall: datetime, zone: ZoneInfo) -> float:
     """A naive CNC wall-clock time in `zone` as epoch seconds (UTC); aware values are taken as they are."""
     aware = cnc_wall if cnc_wall.tzinfo is not None else cnc_wall.replace(tzinfo=zone)
     return aware.timestamp()
-
-
-def utc_ms_to_datetime(ms: int) -> datetime:
-    return datetime(1970, 1, 1, tzinfo=UTC) + timedelta(milliseconds=ms)
 
 
 class ClockTransition(enum.Enum):

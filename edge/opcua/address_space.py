@@ -2,18 +2,24 @@
 
 A machine's birth (its metric specs and first values) adds its object, the 40501 components, the
 `Metrics` folder and one variable per metric (plus its 40501 mirror, edge.opcua.layout), in one batch
-through the node management service. A sample then replaces the Value attribute of the metric's node(s)
-and tells the attribute's monitored items (edge.opcua.subscriptions), which is what asyncua's own
+through the node management service. A sample then becomes the value of the metric's node(s) and is told
+to the attribute's monitored items (edge.opcua.subscriptions), which is what asyncua's own
 write_attribute_value does, without its per-call type check: the value was built for the node's type
 (edge.opcua.values).
+
+Most values are never read: without a client, or with one subscribed to some metrics only, each changed
+value would build a DataValue (a Variant, a datetime, the encoded bytes: ~5 us and two objects for the
+collector to sweep) to be replaced unseen a poll later. So a metric's slot keeps the latest sample and the
+server time it arrived at, and its nodes' Value attribute reads the slot (asyncua's value_callback): the
+DataValue is built when a monitored item is told of the change, or when a client reads it, once.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from typing import Any
 
 from asyncua import ua
@@ -22,7 +28,16 @@ from asyncua.server.internal_server import InternalServer
 from edge.opcua import layout, nodes
 from edge.opcua.shared_attributes import SharedAttributes
 from edge.opcua.subscriptions import GatewayMonitoredItems, notify_all
-from edge.opcua.values import SharedDataValue, data_value, offline_value, server_now, status_code, variant_type
+from edge.opcua.values import (
+    ServerTime,
+    SharedDataValue,
+    data_value,
+    offline_value,
+    server_now,
+    server_time,
+    status_code,
+    variant_type,
+)
 from edge.samples import MetricSpec, MetricType, Sample
 
 log = logging.getLogger(__name__)
@@ -48,12 +63,24 @@ async def deliver(slow: list[Pending]) -> None:
 
 @dataclass(slots=True)
 class MetricSlot:
-    """Where one metric's value lives: the Value attribute of each node showing it."""
+    """Where one metric's value lives, for the Value attribute of each node showing it: `shown`, or when
+    that is None, built from the latest `sample` and the `server_ns` it arrived at on the first read."""
 
     kind: MetricType
     node_ids: list[ua.NodeId]
-    attributes: list[Any]  # asyncua AttributeValue (value + datachange_callbacks)
+    attributes: list[Any]  # asyncua AttributeValue (value_callback + datachange_callbacks)
     writable: bool = False
+    shown: SharedDataValue | None = None
+    sample: Sample | None = None
+    server_ns: int = 0
+
+    def read(self, _node_id: object = None, _attribute_id: object = None) -> SharedDataValue:
+        """The DataValue the nodes show (asyncua's value_callback: Read, a new monitored item's first value)."""
+        shown = self.shown
+        if shown is None:
+            assert self.sample is not None  # shown is only cleared with a sample stored
+            shown = self.shown = data_value(self.sample, server_time(self.server_ns))
+        return shown
 
 
 @dataclass
@@ -95,8 +122,7 @@ class GatewaySpace:
         wanted = {spec.name: spec for spec in specs}
         self._remove(machine, [name for name in machine.slots if name not in wanted])
         items: list[ua.AddNodesItem] = []
-        now = datetime.now(UTC)
-        waiting = SharedDataValue(ua.Variant(None), StatusCode=status_code(_WAITING), ServerTimestamp=now)
+        waiting = SharedDataValue(ua.Variant(None), StatusCode=status_code(_WAITING), ServerTimestamp=server_now().when)
         for name in sorted(wanted):
             spec = wanted[name]
             may_write = writable(spec)
@@ -112,8 +138,10 @@ class GatewaySpace:
         for name, slot in machine.slots.items():
             if not slot.attributes:  # new: no value until a sample brings one
                 slot.attributes = [self._value_attribute(node_id) for node_id in slot.node_ids]
+                slot.shown = waiting
                 for attribute in slot.attributes:
-                    attribute.value = waiting
+                    attribute.value = None
+                    attribute.value_callback = slot.read
             for node_id in slot.node_ids:
                 self.by_node[node_id] = (device_id, name)
         machine.online = True
@@ -197,22 +225,29 @@ class GatewaySpace:
         if machine is None:
             return _NO_PENDING
         slots = machine.slots
-        now = server_now()
+        now_ns = time.time_ns()
+        now: ServerTime | None = None  # built for the first monitored value
         count = 0
         slow = _NO_PENDING
         for sample in samples:
             slot = slots.get(sample.name)
             if slot is None or sample.historical:
                 continue
-            value = data_value(sample, now)
+            slot.sample = sample
+            slot.server_ns = now_ns
+            value = None
             for attribute in slot.attributes:
-                attribute.value = value
                 callbacks = attribute.datachange_callbacks
                 if callbacks:  # monitored: the gateway's items take it synchronously (notify_all, inlined)
+                    if value is None:
+                        if now is None:
+                            now = server_time(now_ns)
+                        value = data_value(sample, now)
                     for handle, callback in callbacks.items():
                         owner = getattr(callback, "__self__", None)
                         if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
                             slow = _pending(slow, ((handle, callback),), value)
+            slot.shown = value  # None: built from the sample when read
             count += 1
         self.values_set += count
         return slow
@@ -226,8 +261,9 @@ class GatewaySpace:
         value = offline_value(server_now())
         slow = _NO_PENDING
         for slot in machine.slots.values():
+            slot.shown = value
+            slot.sample = None
             for attribute in slot.attributes:
-                attribute.value = value
                 if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
                     others = notify_all(attribute.datachange_callbacks, value)
                     if others:

@@ -29,8 +29,7 @@ from asyncua.common import event_objects
 from asyncua.common.events import Event
 from asyncua.server.internal_server import InternalServer
 
-from edge.opcua.values import utc
-from edge.samples import Sample
+from edge.samples import Sample, utc_datetime
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +83,7 @@ class AlarmEvents:
         _set(event, "EnabledState/Id", True)
         event.ActiveState = ua.LocalizedText("Active" if active else "Inactive")
         _set(event, "ActiveState/Id", active)
-        event.add_property("ActiveState/TransitionTime", utc(when_ms), ua.VariantType.DateTime)  # UtcTime
+        event.add_property("ActiveState/TransitionTime", utc_datetime(when_ms), ua.VariantType.DateTime)  # UtcTime
         event.AckedState = ua.LocalizedText("Acknowledged")
         _set(event, "AckedState/Id", True)
         event.ConfirmedState = ua.LocalizedText("Confirmed")
@@ -105,7 +104,7 @@ class AlarmEvents:
     def _stamp(event: Event, device_id: str, when_ms: int) -> None:
         event.EventId = uuid.uuid4().bytes
         event.SourceName = device_id
-        event.Time = utc(when_ms)
+        event.Time = utc_datetime(when_ms)
         event.ReceiveTime = datetime.now(UTC)
 
     async def _trigger(self, event: Event, notifier: ua.NodeId) -> None:

@@ -30,7 +30,7 @@ from asyncua.server.monitored_item_service import MonitoredItemService
 from asyncua.server.subscription_service import SubscriptionService
 
 from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
-from edge.opcua.values import SharedDataValue
+from edge.opcua.values import SharedDataValue, same_reading
 
 _DISABLED = ua.MonitoringMode.Disabled
 
@@ -65,8 +65,7 @@ class GatewayMonitoredItems(MonitoredItemService):
         values = item.mvalue
         previous = values.current_dvalue
         values.current_dvalue = value  # (asyncua's own path moves current to old itself)
-        if previous is not None and (previous is value or (previous.StatusCode == value.StatusCode
-                                                             and previous.Value == value.Value)):
+        if previous is not None and same_reading(previous, value):
             return True  # asyncua's default trigger (StatusValue): nothing a client sees has changed
         # a client's subscription queues the notification's bytes; the server's own ones read objects
         note: Any = prefix + data_value_bytes(value) if subscription.pub_request_callback is not None \

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any
 
 import pytest
@@ -180,3 +181,20 @@ async def test_a_deleted_item_gets_nothing_and_is_forgotten(subscribed: Subscrib
     await _feed(subscribed, _values("Macro/1", 2.0) + _values("Macro/2", 2.0))
     assert await subscribed.publish() == [(22, 2.0, 0)]
     assert [resolved[0] for resolved in items._resolved.values()] == [mid + 1]
+
+
+async def test_a_value_nobody_monitors_is_read_as_its_last_sample_shows_it(subscribed: Subscribed) -> None:
+    space, machine = subscribed.space, subscribed.machine
+    node = ua.NodeId(f"{machine}/Metrics/Macro/3", space.ns)
+    before = datetime.now(UTC)
+    await _feed(subscribed, _values("Macro/3", 1.5, 2.5, ms=CNC_MS + 100))
+    after = datetime.now(UTC)
+    value = space.iserver.aspace.read_attribute_value(node, ua.AttributeIds.Value)
+    assert (value.Value.Value, value.Value.VariantType, value.StatusCode.value) == (2.5, ua.VariantType.Double, 0)
+    assert value.SourceTimestamp == datetime.fromtimestamp((CNC_MS + 101) / 1000, UTC)
+    assert before <= value.ServerTimestamp <= after
+    assert struct_to_binary(value) == value.encoded  # what a Read sends is what a subscription would
+    assert space.iserver.aspace.read_attribute_value(node, ua.AttributeIds.Value) is value  # built once
+    await subscribed.space.offline(machine)
+    offline = space.iserver.aspace.read_attribute_value(node, ua.AttributeIds.Value)
+    assert (offline.Value.Value, offline.StatusCode.value) == (None, ua.StatusCodes.BadNoCommunication)
