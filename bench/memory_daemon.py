@@ -4,10 +4,16 @@ Where a gateway's memory goes is a question of which module allocated the live o
 each SIGUSR1 writes the live Python allocations grouped by module (edge.*, a third-party package, or the
 standard library) and the top allocation sites to OUT.json. tracemalloc costs CPU and memory of its own,
 so the fleet figures of a run with it are not the fleet's figures.
+
+The dump also says how much of it was cyclic garbage: after the first snapshot, everything is unfrozen and
+collected (edge.service.gc_tuning freezes what survives the young collections, so a cycle that outlives
+one waits for the hourly full collection), and the second snapshot's total is `after_full_collection`.
+A dump ends the run's measuring: the collection changes what the daemon holds.
 """
 
 from __future__ import annotations
 
+import gc
 import json
 import signal
 import sys
@@ -61,7 +67,12 @@ def main() -> int:
     tracemalloc.start(1)
 
     def dump(signum: int, frame: FrameType | None) -> None:
-        out.write_text(json.dumps(breakdown(tracemalloc.take_snapshot()), indent=1))
+        found = breakdown(tracemalloc.take_snapshot())
+        gc.unfreeze()
+        found["collected_objects"] = gc.collect()
+        after = breakdown(tracemalloc.take_snapshot())
+        found["after_full_collection"] = {"total_bytes": after["total_bytes"], "modules": after["modules"]}
+        out.write_text(json.dumps(found, indent=1))
 
     signal.signal(signal.SIGUSR1, dump)
     return run_daemon(config)

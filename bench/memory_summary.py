@@ -23,6 +23,14 @@ def main(argv: list[str] | None = None) -> None:
     total = doc["total_bytes"]
     each = f", {total / per / 1e3:.1f} kB per machine" if per else ""
     print(f"live Python allocations: {total / 1e6:.1f} MB{each}")
+    if "after_full_collection" in doc:  # what a full collection freed: cyclic garbage the freezes kept
+        after = doc["after_full_collection"]["total_bytes"]
+        print(f"after a full collection ({doc['collected_objects']:,d} objects freed): {after / 1e6:.1f} MB"
+              + (f", {after / per / 1e3:.1f} kB per machine" if per else ""))
+        kept = {row["module"]: row["bytes"] for row in doc["after_full_collection"]["modules"]}
+        freed = sorted(((row["bytes"] - kept.get(row["module"], 0), row["module"]) for row in doc["modules"]),
+                       reverse=True)
+        print("  freed by module: " + ", ".join(f"{m} {b / 1e6:.2f} MB" for b, m in freed[:8] if b > 0))
     for title, rows, key in (("module", doc["modules"], "module"), ("site", doc["sites"], "site")):
         print(f"\n{'by ' + title:<48} {'MB':>8} {'share':>6} {'blocks':>9}" + (f" {'B/machine':>10}" if per else ""))
         for row in rows[:args.top]:

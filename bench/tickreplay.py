@@ -52,7 +52,7 @@ async def begin_session(poller: MachinePoller, node: SparkplugNode) -> pl.Machin
     static = await poller._read_static()
     plan = pl.MachinePlan.build(poller.machine.poll, static)
     poller._full_plan = poller._plan = plan
-    poller._changes = ChangeDetector(plan.deadbands())
+    poller._changes = ChangeDetector(plan.deadbands(), [spec.name for spec in poller._birth_specs(plan)])
     poller._last_raw = [poller_module._NOTHING] * len(plan.reads)
     poller._clock.new_session()
     node.device_online(poller.machine_id, [*plan.metrics(), poller_module.DROPPED_FUNCTIONS, *PLANT_STATE_SPECS], [])

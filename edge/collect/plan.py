@@ -20,7 +20,7 @@ from typing import Any
 
 from edge.collect.clock import SYNC_TARGET_S
 from edge.collect.execution import CONTROLLER_MODE, EXECUTION, derive
-from edge.collect.settings import PollSettings
+from edge.collect.settings import Periods, PollSettings
 from edge.focas import items as it
 from edge.focas.model import ActiveAlarm, PmcType, StatInfo, SysInfo
 from edge.focas.values import ALL_AXES
@@ -171,11 +171,7 @@ class MachinePlan:
             if len(_SHARED_READS) >= SHARED_READS_LIMIT:
                 _SHARED_READS.clear()
             reads = _SHARED_READS[key] = _build_reads(poll, static)
-        periods = poll.periods
-        return cls(reads, {
-            Group.STATUS: periods.status, Group.ACTIVE_ALARMS: periods.status, Group.MACROS: periods.macros,
-            Group.PMC: periods.pmc, Group.PARAMS: periods.params, Group.DIAGS: periods.diags,
-            Group.LOADS: periods.loads, Group.COUNTERS: periods.counters, Group.ALARM_HISTORY: periods.alarm_history})
+        return cls(reads, _group_periods(poll.periods))
 
     def reads_for(self, groups: Iterable[Group]) -> list[PlannedRead]:
         """The reads of `groups`, in plan order (the poller adds ReadClock to every batch)."""
@@ -205,8 +201,22 @@ class MachinePlan:
         return bands
 
 
+def _group_periods(periods: Periods) -> dict[Group, float]:
+    """Each group's period: one dict per distinct `Periods`, shared by the plans (nothing changes it)."""
+    found = _GROUP_PERIODS.get(periods)
+    if found is None:
+        if len(_GROUP_PERIODS) >= SHARED_READS_LIMIT:
+            _GROUP_PERIODS.clear()
+        found = _GROUP_PERIODS[periods] = {
+            Group.STATUS: periods.status, Group.ACTIVE_ALARMS: periods.status, Group.MACROS: periods.macros,
+            Group.PMC: periods.pmc, Group.PARAMS: periods.params, Group.DIAGS: periods.diags,
+            Group.LOADS: periods.loads, Group.COUNTERS: periods.counters, Group.ALARM_HISTORY: periods.alarm_history}
+    return found
+
+
 SHARED_READS_LIMIT = 256  # distinct (poll settings, static answers) pairs kept; a fleet has a few models
 _SHARED_READS: dict[tuple[PollSettings, StaticInfo], tuple[PlannedRead, ...]] = {}
+_GROUP_PERIODS: dict[Periods, dict[Group, float]] = {}
 
 
 def _build_reads(poll: PollSettings, static: StaticInfo) -> tuple[PlannedRead, ...]:
@@ -530,13 +540,29 @@ _GROUP_BITS = {group: 1 << index for index, group in enumerate(Group)}
 _COMBINATIONS: dict[int, frozenset[Group]] = {}
 
 
+def group_set(groups: Iterable[Group]) -> frozenset[Group]:
+    """The process's one frozenset of these groups (what `Schedule.due` hands out): a poller keys its
+    batches and read times by such sets, and a set of its own per machine was ~0.3 kB each."""
+    mask = 0
+    for group in groups:
+        mask |= _GROUP_BITS[group]
+    return _combination(mask)
+
+
+def _combination(mask: int) -> frozenset[Group]:
+    groups = _COMBINATIONS.get(mask)
+    if groups is None:
+        groups = _COMBINATIONS[mask] = frozenset(g for g, bit in _GROUP_BITS.items() if mask & bit)
+    return groups
+
+
 class Schedule:
     """Per-group due times for one session. Static is due once per connection; a group that fell
     behind is not caught up tick by tick: its next time moves past `now`, and the skipped periods
     are counted."""
 
     def __init__(self, periods: dict[Group, float]) -> None:
-        self.periods = dict(periods)
+        self.periods = periods  # the plan's (shared by the plans of one poll setting): read, never changed
         self._next: dict[Group, float] = {}
         self._static_pending = True
         self.skipped = 0
@@ -563,9 +589,7 @@ class Schedule:
                 following += missed * period
             self._next[group] = following
         groups = _COMBINATIONS.get(mask)
-        if groups is None:
-            groups = _COMBINATIONS[mask] = frozenset(g for g, bit in _GROUP_BITS.items() if mask & bit)
-        return groups
+        return groups if groups is not None else _combination(mask)
 
     def next_due(self) -> float | None:
         """The earliest time any group is due (None before start())."""

@@ -33,8 +33,6 @@ from operator import is_not
 from pathlib import Path
 from typing import Any, Protocol
 
-from tenacity import AsyncRetrying, RetryCallState, retry_if_exception_type, wait_random_exponential
-
 from edge.collect import plan as pl
 from edge.collect.alarms import ActiveAlarmProjection, AlarmHistoryDedup, WatermarkStore, history_event
 from edge.collect.answer_time import AnswerTime
@@ -53,7 +51,7 @@ from edge.focas import items as it
 from edge.focas.connect import open_session
 from edge.focas.errors import FocasError, FunctionNotAvailable, NotSupported
 from edge.focas.model import ActiveAlarm, AlarmHistoryEntry, StatInfo
-from edge.focas.outage import ConnectOutage
+from edge.focas.outage import ConnectOutage, backoff_s
 from edge.focas.session import CncSession
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 
@@ -104,6 +102,13 @@ def default_session(machine: MachineSettings) -> CncSession:
 class MachinePoller:
     """Owns one machine's session and polling task; `run()` until cancelled, `close()` after."""
 
+    # A poller has more attributes than an instance dict shares keys for (30): its own dict was ~1.5 kB.
+    __slots__ = ("_alarms", "_answer_time", "_batches", "_batches_plan", "_by_due", "_changes", "_clock",
+                 "_dropped", "_full_plan", "_grid", "_history", "_jitter_s", "_last_raw", "_metric_groups",
+                 "_outage", "_paths", "_plan", "_read_at_by_due", "_retry_at", "_retrying", "_session_up",
+                 "_start", "_unsupported_ops", "_up", "_warned_dropped", "clock", "last_error", "last_progress",
+                 "machine", "online", "online_changed_at", "plant_state", "session", "sink", "stats")
+
     def __init__(self, machine: MachineSettings, sink: DeviceSink, state_dir: Path,
                  session_factory: SessionFactory = default_session, jitter_s: float = 1.0,
                  grid: TickGrid | None = None, start_gate: StartGate | None = None) -> None:
@@ -143,9 +148,28 @@ class MachinePoller:
         # Per read of the current plan (by index in plan.reads), its last good result: a read whose
         # result is that very object again did not move (the client hands an unchanged answer's value back).
         self._last_raw: list[object] = []
-        self.session_up = asyncio.Event()  # set while the CNC session is up and the device is born
+        self._up = False  # the CNC session is up and the device is born
+        self._session_up: asyncio.Event | None = None  # made when first asked for (~0.7 kB: its deque)
         self._paths = PathCheck(machine)
         self.plant_state = PlantState(machine.id, machine.zone, state_dir)  # availability, utilisation
+
+    @property
+    def session_up(self) -> asyncio.Event:
+        """Set while the CNC session is up and the device is born (what a write waits for)."""
+        event = self._session_up
+        if event is None:
+            event = self._session_up = asyncio.Event()
+            if self._up:
+                event.set()
+        return event
+
+    def _set_up(self, up: bool) -> None:
+        self._up = up
+        if self._session_up is not None:
+            if up:
+                self._session_up.set()
+            else:
+                self._session_up.clear()
 
     @property
     def machine_id(self) -> str:
@@ -207,28 +231,26 @@ class MachinePoller:
     # ---- lifecycle -----------------------------------------------------------------------------------
     async def run(self) -> None:
         """Connect (with backoff), poll until the session breaks, go offline, repeat. Cancel to stop."""
-        self._start_minutes()
-        await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
-        while True:
-            await self._connect()
-            try:
-                await self._start.acquire()  # the start's reads and birth: at most K machines at a time
-                await self._poll_session()
-            except FocasError as exc:
-                log.warning("session lost machine=%s error=%s", self.machine_id, exc)
-                self.last_error = f"session lost: {exc}"
-            finally:
-                self._start.release()
-                await self._go_offline()
-                await self.session.reset()
-
-    def _start_minutes(self) -> None:
-        """The utilisation minute publish, a task of its own that ends with the run task."""
+        # The utilisation minute publish, a task of its own that ends with this one (a try, not a done
+        # callback on this task: its closure was ~0.4 kB a machine).
         minutes = asyncio.create_task(self.plant_state.run_minutes(self.cnc_time_ms, self._publish_born),
                                       name=f"utilisation-{self.machine_id}")
-        run_task = asyncio.current_task()
-        if run_task is not None:
-            run_task.add_done_callback(lambda _: minutes.cancel())
+        try:
+            await asyncio.sleep(random.uniform(0, self._jitter_s))  # a fleet must not poll in lock-step
+            while True:
+                await self._connect()
+                try:
+                    await self._start.acquire()  # the start's reads and birth: at most K machines at a time
+                    await self._poll_session()
+                except FocasError as exc:
+                    log.warning("session lost machine=%s error=%s", self.machine_id, exc)
+                    self.last_error = f"session lost: {exc}"
+                finally:
+                    self._start.release()
+                    await self._go_offline()
+                    await self.session.reset()
+        finally:
+            minutes.cancel()
 
     async def close(self) -> None:
         """Save the utilisation counters, send the close PDU (the run task must already be cancelled)."""
@@ -237,25 +259,21 @@ class MachinePoller:
             await self.session.close()
 
     async def _connect(self) -> None:
+        """Connect, retrying a FocasError after edge.focas.outage.backoff_s (the outage logged, not each try)."""
         timeouts = self.machine.timeouts
-
-        def before_sleep(state: RetryCallState) -> None:
-            self.last_progress = time.monotonic()
-            error = state.outcome.exception() if state.outcome else None
-            delay = state.next_action.sleep if state.next_action else 0.0
-            reason = connect_error(self.machine, error)
-            self.last_error = f"connect failed: {reason}"
-            self._outage.failed(reason, delay)
-
-        retrying = AsyncRetrying(
-            retry=retry_if_exception_type(FocasError),
-            wait=wait_random_exponential(multiplier=timeouts.backoff_initial_s, max=timeouts.backoff_max_s),
-            before_sleep=before_sleep,
-            reraise=True,
-        )
-        async for attempt in retrying:
-            with attempt:
+        failures = 0
+        while True:
+            try:
                 await self.session.connect()
+                break
+            except FocasError as error:
+                failures += 1
+                delay = backoff_s(failures, timeouts.backoff_initial_s, timeouts.backoff_max_s)
+                self.last_progress = time.monotonic()
+                reason = connect_error(self.machine, error)
+                self.last_error = f"connect failed: {reason}"
+                self._outage.failed(reason, delay)
+            await asyncio.sleep(delay)  # outside the handler: the error and its traceback are gone
         self.stats.connects += 1
         self.last_progress = time.monotonic()
         log.info("connected machine=%s endpoint=%s model=%s", self.machine_id, self.machine.endpoint,
@@ -263,7 +281,7 @@ class MachinePoller:
         self._outage.connected()
 
     async def _go_offline(self) -> None:
-        self.session_up.clear()
+        self._set_up(False)
         unavailable = self.plant_state.offline(self.cnc_time_ms())  # counted OFFLINE even if never born
         if not self.online:
             return
@@ -278,7 +296,7 @@ class MachinePoller:
     # ---- one session ---------------------------------------------------------------------------------
     async def _poll_session(self) -> None:
         static = await self._read_static()
-        self._read_at_by_due = {frozenset((pl.Group.STATIC,)): time.time()}
+        self._read_at_by_due = {pl.group_set((pl.Group.STATIC,)): time.time()}
         paths = await self._paths.count(self.session)
         plan = pl.MachinePlan.build(self.machine.poll, static)
         for operation in self._unsupported(plan):
@@ -290,22 +308,21 @@ class MachinePoller:
         schedule = pl.Schedule(plan.periods)
         schedule.start(time.monotonic())
         schedule.due(time.monotonic())  # static group already read above
-        self._changes = ChangeDetector(plan.deadbands())
+        self._changes = ChangeDetector(plan.deadbands(), [spec.name for spec in self._birth_specs(plan)])
         self._last_raw = [_NOTHING] * len(plan.reads)
         self._clock.new_session()
         self._answer_time.reset()
-        first = await self._tick(plan, frozenset(plan.periods))
-        specs = [*plan.metrics(), DROPPED_FUNCTIONS, *PLANT_STATE_SPECS]
+        first = await self._tick(plan, pl.group_set(plan.periods))
+        specs = self._birth_specs(plan, with_paths=paths is not None)
         extra = [*self._static_samples(plan, first.samples), self._dropped_sample(first.samples)]
         extra += self.plant_state.birth_samples(extra[-1].timestamp_ms)
         if paths is not None:
-            specs.append(PATH_COUNT)
             extra.append(Sample(PATH_COUNT.name, paths, PATH_COUNT.type, extra[-1].timestamp_ms))
         born = [*first.samples, *self._changes.filter(extra)]
         await self.sink.device_online(self.machine_id, specs, born)
         self.online = True
         self.online_changed_at = time.time()
-        self.session_up.set()
+        self._set_up(True)
         self._start.release()
         if first.events or first.history:
             await self._emit_events(first.events, first.history)
@@ -332,6 +349,11 @@ class MachinePoller:
             elapsed = time.monotonic() - started
             if elapsed > fastest:
                 self.stats.overruns += 1
+
+    @staticmethod
+    def _birth_specs(plan: pl.MachinePlan, with_paths: bool = True) -> list[MetricSpec]:
+        """The metrics a session's DBIRTH declares (the path count only where the control answered it)."""
+        return [*plan.metrics(), DROPPED_FUNCTIONS, *PLANT_STATE_SPECS, *((PATH_COUNT,) if with_paths else ())]
 
     async def _read_static(self) -> pl.StaticInfo:
         items = [it.ReadAxisNames(), it.ReadSpindleNames()]
@@ -380,14 +402,14 @@ class MachinePoller:
         batch = self._by_due.get(groups)  # the schedule hands out one frozenset per combination
         if batch is not None:
             return batch
-        key = frozenset(groups - _NOT_IN_TICK)  # combinations that differ only there share one batch
+        key = pl.group_set(groups - _NOT_IN_TICK)  # combinations that differ only there share one batch
         batch = self._batches.get(key)
         if batch is None:
             reads = plan.reads_for(key)
             index = {id(read): i for i, read in enumerate(plan.reads)}
             batch = TickBatch.shared(reads, [index[id(read)] for read in reads])
             self._batches[key] = batch
-        self._by_due[frozenset(groups)] = batch
+        self._by_due[pl.group_set(groups)] = batch
         return batch
 
     async def _tick(self, plan: pl.MachinePlan, groups: AbstractSet[pl.Group]) -> TickResult:

@@ -11,6 +11,7 @@ own CNC handle all log their outages this way (the MQTT broker: edge.publish.bro
 from __future__ import annotations
 
 import logging
+import random
 import time
 from collections.abc import Callable
 from datetime import datetime
@@ -31,6 +32,14 @@ def duration_words(seconds: float) -> str:
         return f"{hours} h {minutes} min"
     days, hours = divmod(hours, 24)
     return f"{days} d {hours} h"
+
+
+def backoff_s(failures: int, initial_s: float, max_s: float) -> float:
+    """The wait before the next connect attempt after `failures` failed ones in a row: capped exponential
+    backoff with full jitter, uniform in [0, min(max_s, initial_s * 2**(failures - 1))] (as tenacity's
+    wait_random_exponential, which a plain loop replaces where a session connects: its retry objects
+    hold each other, and a cycle that outlives a young collection waits for the hourly full one)."""
+    return random.uniform(0.0, min(max_s, initial_s * 2.0 ** min(failures - 1, 64)))
 
 
 def local_time(epoch_s: float) -> str:

@@ -105,7 +105,9 @@ class AliasMap:
         index = self._indexes.get(names)
         if index is None:
             index = self._indexes[names] = _Index(names)
-        return _Known(index, array("q", aliases))
+        aliases = list(aliases)
+        small = all(0 <= alias <= 0xFFFF_FFFF for alias in aliases)  # nearly always: 4 bytes each, not 8
+        return _Known(index, array("I" if small else "q", aliases))
 
     def alias(self, device_id: str, name: str) -> int:
         """The alias of a metric, allocating the next free one (never reused) the first time."""

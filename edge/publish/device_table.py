@@ -6,13 +6,20 @@ type and alias, and its last samples) and a tuple per metric: ~13 kB a machine o
 and type) is now one `MetricLayout` per distinct list of specs, which a fleet polling alike shares; a
 `DeviceTable` keeps only what is its own, by position: its alias fields (the DATA bytes that name a
 metric) and its last samples (what the next birth carries).
+
+The alias fields are one byte string with the offsets of each (`alias_field(p)` is
+`alias_data[alias_ends[p]:alias_ends[p + 1]]`): a bytes object per metric was ~48 bytes with its header,
+~5 kB a machine with the tuple, the string and its offsets ~0.8 kB. A DATA message slices the fields of
+the metrics it carries (~70 ns each).
 """
 
 from __future__ import annotations
 
 import weakref
+from array import array
 from collections import deque
 from collections.abc import Iterable, Sequence
+from itertools import accumulate
 from operator import attrgetter, itemgetter
 
 from edge.publish import ddata as dd
@@ -59,16 +66,23 @@ def layout_of(specs: Sequence[MetricSpec]) -> MetricLayout:
 class DeviceTable:
     """One device's (or the node's) own part: alias fields and last samples by the layout's positions."""
 
-    __slots__ = ("alias_fields", "data_topic", "last", "layout", "not_good", "online")
+    __slots__ = ("alias_data", "alias_ends", "data_topic", "last", "layout", "not_good", "online")
 
     def __init__(self, layout: MetricLayout, aliases: Sequence[int], online: bool = False,
                  data_topic: str = "") -> None:
         self.layout = layout
-        self.alias_fields = tuple(map(dd.alias_field, aliases))
+        fields = list(map(dd.alias_field, aliases))
+        self.alias_data = b"".join(fields)  # every metric's alias field, by position
+        self.alias_ends = array("I", accumulate(map(len, fields), initial=0))  # field p: ends[p]..ends[p + 1]
         self.last: list[Sample | None] = [None] * len(layout.names)
         self.online = online
         self.not_good: set[str] = set()  # published last with a non-GOOD quality
         self.data_topic = data_topic  # its DDATA topic (NDATA for the node)
+
+    def alias_field(self, position: int) -> bytes:
+        """The alias field (DATA bytes) of the metric at `position`."""
+        ends = self.alias_ends
+        return self.alias_data[ends[position]:ends[position + 1]]
 
     def record(self, samples: Sequence[Sample]) -> None:
         """Keep these (declared) samples as the metrics' last values; a later one of a name wins."""

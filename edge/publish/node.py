@@ -389,7 +389,7 @@ class SparkplugNode:
         append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
         double, double_field = dd.DOUBLE_FIELD, dd.VALUE_FIELDS[MetricType.DOUBLE]
-        slots, alias_fields = dev.layout.slots, dev.alias_fields
+        slots, alias_data, alias_ends = dev.layout.slots, dev.alias_data, dev.alias_ends
         not_good = dev.not_good
         good = Quality.GOOD
         last_ts = -1
@@ -397,7 +397,7 @@ class SparkplugNode:
         double_size = 0
         for s in sorted(samples, key=_by_timestamp):
             position, value_field, mtype = slots[s.name]
-            alias = alias_fields[position]
+            alias = alias_data[alias_ends[position]:alias_ends[position + 1]]
             if s.timestamp_ms != last_ts:  # sorted: equal timestamps are adjacent
                 last_ts = s.timestamp_ms
                 stamp = dd.timestamp_field(last_ts)
@@ -431,14 +431,14 @@ class SparkplugNode:
         append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
         historical = dd.HISTORICAL
-        slots, alias_fields = dev.layout.slots, dev.alias_fields
+        slots, alias_data, alias_ends = dev.layout.slots, dev.alias_data, dev.alias_ends
         not_good = set(dev.not_good)
         good = int(Quality.GOOD)
         last_ts = -1
         stamp = b""
         for name, value, _, ts, quality in sorted(rows, key=_row_timestamp):
             position, value_field, mtype = slots[name]
-            alias = alias_fields[position]
+            alias = alias_data[alias_ends[position]:alias_ends[position + 1]]
             if ts != last_ts:
                 last_ts = ts
                 stamp = dd.timestamp_field(ts) + historical

@@ -120,3 +120,31 @@ def test_the_change_detectors_samples_are_the_samples_the_constructor_builds() -
     assert type(built) is Sample and built.historical is False
     with pytest.raises(dataclasses.FrozenInstanceError):
         built.value = 2.0  # type: ignore[misc]
+
+
+@given(_offers, st.sampled_from([0.0, 0.5]))
+def test_property_declared_names_change_nothing_but_where_samples_are_kept(
+        offers: list[tuple[str, object, Quality, MetricType]], band: float) -> None:
+    """Samples kept by position ("q" declared, its index shared) or not ("p") decide and remember as before."""
+    undeclared, declared = ChangeDetector({"p": band}), ChangeDetector({"p": band}, names=["q", "q"])
+    other = ChangeDetector(names=["q", "q"])
+    for t, (name, value, quality, kind) in enumerate(offers):
+        if t == len(offers) // 2:
+            for detector in (undeclared, declared):
+                detector.forget("p")
+                detector.forget("q")
+        expected = undeclared.report(name, value, kind, t, quality)
+        assert declared.report(name, value, kind, t, quality) == expected
+    assert declared.last_reported() == undeclared.last_reported()
+    assert other.last_reported() == {}  # the index is shared, the samples are not
+    declared.reset()
+    assert declared.last_reported() == {}
+    if offers:
+        name, value, quality, kind = offers[0]
+        assert declared.offer(Sample(name, value, kind, 0, quality))  # after reset: reported again
+
+
+def test_declared_metrics_come_first_in_the_picture_then_the_others_as_first_reported() -> None:
+    detector = ChangeDetector(names=["b", "a"])
+    detector.filter([s("z", 1.0), s("a", 1.0), s("y", 1.0), s("b", 1.0)])
+    assert list(detector.last_reported()) == ["b", "a", "z", "y"]

@@ -7,7 +7,7 @@ import logging
 
 import pytest
 
-from edge.focas.outage import ConnectOutage, duration_words
+from edge.focas.outage import ConnectOutage, backoff_s, duration_words
 
 LOGGER = logging.getLogger("test.outage")
 
@@ -59,3 +59,11 @@ def test_a_weekend_outage_is_one_warning_rare_reminders_and_one_line_when_it_is_
     outage.failed("timed out")  # a new run: its first failure is a WARNING again
     assert lines(caplog, logging.WARNING) == [
         "connect failed machine=m1 error=timed out (repeats are logged at DEBUG, a reminder every 1 h 0 min)"]
+
+
+def test_backoff_is_jittered_below_a_doubling_cap() -> None:
+    """Capped exponential backoff with full jitter: after n failures, uniform in [0, min(max, initial * 2**(n-1))]."""
+    for failures, cap in ((1, 0.5), (2, 1.0), (3, 2.0), (7, 30.0), (10_000, 30.0)):
+        waits = [backoff_s(failures, 0.5, 30.0) for _ in range(400)]
+        assert all(0.0 <= w <= cap for w in waits)
+        assert max(waits) > 0.75 * cap and min(waits) < 0.25 * cap  # spread over the range, not fixed
