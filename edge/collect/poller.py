@@ -315,7 +315,7 @@ class MachinePoller:
             next_due = schedule.next_due() or time.monotonic() + fastest
             if await self._probe_clock_before(next_due):
                 continue
-            await self._grid.sleep_until(next_due)
+            await self._grid.wake_at(next_due)
             started = time.monotonic()
             groups = schedule.due(started)
             self.stats.skipped = schedule.skipped
