@@ -48,7 +48,7 @@ from edge.focas.frame import (
 )
 from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, call_value, first_value, item_value, shared_plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, shared_plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -308,9 +308,10 @@ class FocasClient(CncSession):
                 todo = range(len(slots))
             elif moved:
                 owners = pdu.layout.owners
-                todo = {owners[i] for i in moved}
+                entries = dict.fromkeys(map(owners.__getitem__, moved))  # once each, in order, in C
                 if stale:
-                    todo.update(entry for entry, slot in enumerate(slots) if slot in stale)
+                    entries.update(dict.fromkeys(entry for entry, slot in enumerate(slots) if slot in stale))
+                todo = entries
             elif stale and not stale.isdisjoint(slots):
                 todo = [entry for entry, slot in enumerate(slots) if slot in stale]
             else:
@@ -326,7 +327,14 @@ class FocasClient(CncSession):
                     if answer is None:  # not moved, decoded again (its value was an error)
                         answer = cast(AnswerSplitter, splitter).answer(body, start)
                     decode, request, name = call
-                    value = call_value(decode, name, request, answer, context)
+                    rc, detail, payload = answer  # native.call_value, inline (every moved item of a tick)
+                    if rc:
+                        value = cnc_error(rc, name, detail)
+                    else:
+                        try:
+                            value = decode(payload, request, context)
+                        except FocasError as exc:
+                            value = exc
                 slot = slots[entry]
                 if isinstance(value, FocasError):
                     stale.add(slot)
