@@ -1,6 +1,7 @@
 """The daemon under pyinstrument: `python -m bench.profiled_daemon CONFIG OUT.txt` (stops on SIGTERM).
 
-The profile covers the whole run; the text report (call tree) and a flat top list are written at exit.
+The profile covers the whole run; the text report (call tree) and a flat top list are written at exit, and the
+session itself beside it (OUT.session.json; `python -m bench.profile_breakdown` gives its busy time by layer).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ def main() -> int:
         tree = ConsoleRenderer(unicode=False, color=False, show_all=False, time="percent_of_total")
         flat = ConsoleRenderer(unicode=False, color=False, flat=True, time="percent_of_total")
         out.write_text(tree.render(session) + "\n\n==== flat ====\n" + flat.render(session))
+        session.save(str(out.with_suffix(".session.json")))
     return code
 
 

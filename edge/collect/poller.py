@@ -330,9 +330,10 @@ class MachinePoller:
         fastest = min(plan.periods.values())
         while True:
             next_due = schedule.next_due() or time.monotonic() + fastest
-            if await self._probe_clock_before(next_due):
+            if (probe_at := self._probe_before(next_due)) is not None:  # no coroutine on the ticks without one
+                await self._probe_clock(probe_at)
                 continue
-            await self._grid.sleep_until(next_due)
+            await self._grid.wake_at(next_due)
             started = time.monotonic()
             groups = schedule.due(started)
             self.stats.skipped = schedule.skipped
@@ -522,14 +523,15 @@ class MachinePoller:
                  ",".join(sorted(answered)))
         samples.extend(self._changes.filter([self._dropped_sample(samples, timestamp)]))
 
-    async def _probe_clock_before(self, next_due: float) -> bool:
-        """Read the clock alone when the tracker wants a reading before the next tick (clock_probe): True
-        when it did. Its time is exact (its own timer, not the shared tick grid); its values wait for the
-        next tick, whose stamps it improved."""
+    def _probe_before(self, next_due: float) -> float | None:
+        """When to read the clock alone, if the tracker wants a reading before the next tick (clock_probe)."""
         half_rtt = self.stats.last_cycle_s / 2
         send_at = self._clock.probes.send_at(time.monotonic(), half_rtt, self._answer_time.usual_s / 2)
-        if send_at >= self._grid.slot_time(next_due):
-            return False
+        return None if send_at >= self._grid.slot_time(next_due) else send_at
+
+    async def _probe_clock(self, send_at: float) -> None:
+        """Read the clock alone at `send_at` (_probe_before). Its time is exact (its own timer, not the shared
+        tick grid); its values wait for the next tick, whose stamps it improved."""
         delay = send_at - time.monotonic()
         if delay > 0:
             await asyncio.sleep(delay)
@@ -542,7 +544,6 @@ class MachinePoller:
                             (mono_after - mono_before) / 2)
         self._clock.probes.done(mono_after)
         self._clock.news = True
-        return True
 
     def _observe_clock(self, result: object, mid_mono: float, mid_wall: float, half_rtt: float) -> bool:
         """Feed a clock answer to the clock (edge.collect.clock_feed); a failed read counts like any function's."""

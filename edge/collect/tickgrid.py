@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Awaitable
 
 # Half the shortest poll period the config accepts (edge.config.SHORTEST_PERIOD_S; a unit test keeps the two
 # together): a grid that fits any machine, for a poller given none.
@@ -53,12 +54,16 @@ class TickGrid:
 
     async def sleep_until(self, when: float) -> None:
         """Sleep until the grid point at or after `when`; cancelling one sleeper affects no other."""
+        await self.wake_at(when)
+
+    def wake_at(self, when: float) -> Awaitable[None]:
+        """sleep_until's awaitable, without a coroutine of its own (a poller awaits one every tick; each level
+        of its await chain is re-entered at the wake-up): the slot's future, or one yield when already due."""
         loop = asyncio.get_running_loop()
         step = self._step_s
         index = math.ceil(when / step)
         if index * step <= loop.time():
-            await asyncio.sleep(0)  # already due: yield once, as asyncio.sleep(0) would
-            return
+            return asyncio.sleep(0)  # already due: yield once
         slot = (step, index)
         waiters = self._slots.get(slot)
         if waiters is None:
@@ -66,7 +71,7 @@ class TickGrid:
             loop.call_at(index * step, self._fire, slot)
         waiter: asyncio.Future[None] = loop.create_future()
         waiters.append(waiter)
-        await waiter
+        return waiter
 
     def _fire(self, slot: tuple[float, int]) -> None:
         for waiter in self._slots.pop(slot, ()):

@@ -48,7 +48,7 @@ from edge.focas.frame import (
 )
 from edge.focas.functions import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, call_value, first_value, item_value, shared_plan_item
+from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, shared_plan_item
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -72,6 +72,7 @@ class FrameStream(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self._decoder = FrameDecoder()
         self._frames: deque[Frame] = deque()
+        self.frames = self._frames  # complete frames not taken yet (the request path pops them itself)
         self._waiter: asyncio.Future[None] | None = None
         self._error: ProtocolError | None = None
         self._lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -93,8 +94,10 @@ class FrameStream(asyncio.Protocol):
 
     def _wake(self) -> None:
         waiter = self._waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(None)
+        if waiter is not None:
+            self._waiter = None
+            if not waiter.done():
+                waiter.set_result(None)
 
     def send(self, data: bytes) -> None:
         if self.transport is None or self._lost.done():
@@ -103,17 +106,19 @@ class FrameStream(asyncio.Protocol):
 
     async def next_frame(self) -> Frame:
         while not self._frames:
-            if self._error is not None:
-                raise self._error
-            if self._lost.done():
-                raise ConnectionLost(f"{self.peer}: peer closed the connection "
-                                     f"({self._decoder.buffered} bytes of a frame pending)")
-            self._waiter = asyncio.get_running_loop().create_future()
-            try:
-                await self._waiter
-            finally:
-                self._waiter = None
+            await self.arrival()
         return self._frames.popleft()
+
+    def arrival(self) -> asyncio.Future[None]:
+        """A future done when the next bytes arrive or the connection ends (awaited directly by the request
+        path: no coroutine of its own); raises at once if the stream is broken."""
+        if self._error is not None:
+            raise self._error
+        if self._lost.done():
+            raise ConnectionLost(f"{self.peer}: peer closed the connection "
+                                 f"({self._decoder.buffered} bytes of a frame pending)")
+        waiter = self._waiter = self._lost.get_loop().create_future()
+        return waiter
 
     def clear(self) -> None:
         """Forget frames nobody waits for any more (a new session starts)."""
@@ -303,7 +308,7 @@ class FocasClient(CncSession):
                 todo = range(len(slots))
             elif moved:
                 owners = pdu.layout.owners
-                todo = {owners[i] for i in moved}
+                todo = {owners[i] for i in moved}  # (a map of owners.__getitem__ is twice as slow: a slot wrapper)
                 if stale:
                     todo.update(entry for entry, slot in enumerate(slots) if slot in stale)
             elif stale and not stale.isdisjoint(slots):
@@ -321,7 +326,14 @@ class FocasClient(CncSession):
                     if answer is None:  # not moved, decoded again (its value was an error)
                         answer = cast(AnswerSplitter, splitter).answer(body, start)
                     decode, request, name = call
-                    value = call_value(decode, name, request, answer, context)
+                    rc, detail, payload = answer  # native.call_value, inline (every moved item of a tick)
+                    if rc:
+                        value = cnc_error(rc, name, detail)
+                    else:
+                        try:
+                            value = decode(payload, request, context)
+                        except FocasError as exc:
+                            value = exc
                 slot = slots[entry]
                 if isinstance(value, FocasError):
                     stale.add(slot)
@@ -451,7 +463,10 @@ class FocasClient(CncSession):
         self._in_flight = True
         stream.send(data)
         self.pdus_sent += 1
-        frame = await stream.next_frame()
+        frames = stream.frames
+        while not frames:  # stream.next_frame, inline: one coroutine less on every request's await chain
+            await stream.arrival()
+        frame = frames.popleft()
         if frame.type != expected:
             raise ProtocolError(f"{self.describe()}: {what}: expected a 0x{int(expected):04x} frame, "
                                 f"got type 0x{frame.type:04x} ({len(frame.body)} body bytes)")

@@ -21,7 +21,7 @@ import struct
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from itertools import compress
-from operator import itemgetter, not_
+from operator import itemgetter, ne
 from typing import Any
 
 from edge.focas.errors import ProtocolError
@@ -312,14 +312,15 @@ class AnswerSplitter:
 
     Most subpackets of a poll answer repeat byte for byte, at the same offsets. While the body keeps its
     size and count, each slot's last answer (in the session's AnswerMemo, whichever PDU brought it) is
-    compared in place with the bytes at its offset, in C; only a subpacket that differs is parsed (and
-    checked) again. A changed piece whose length moved, or a body of another size, is split from scratch.
-    `split` says which subpackets moved (None: all of them) and gives their answers; `answer` parses any
-    other subpacket of the same body when a caller needs it (an item with several calls, an error retried).
-    Per PDU only numbers are kept (offsets and lengths, shared between equal layouts), no answer.
+    compared with the bytes at its offset, in C (the body cut into its pieces by one struct unpack); only a
+    subpacket that differs is parsed (and checked) again. A changed piece whose length moved, or a body of
+    another size, is split from scratch. `split` says which subpackets moved (None: all of them) and gives
+    their answers; `answer` parses any other subpacket of the same body when a caller needs it (an item with
+    several calls, an error retried). Per PDU only numbers are kept (offsets, lengths and the struct that
+    cuts the body, shared between equal layouts), no answer.
     """
 
-    __slots__ = ("_echoes", "_generation", "_get", "_head", "_indices", "_lengths", "_memo", "_offsets",
+    __slots__ = ("_cut", "_echoes", "_generation", "_get", "_head", "_indices", "_lengths", "_memo", "_offsets",
                  "_size", "_slots")
 
     def __init__(self, echoes: Sequence[Echo], slots: tuple[int, ...], memo: AnswerMemo) -> None:
@@ -334,6 +335,7 @@ class AnswerSplitter:
         self._size = -1  # no answer yet
         self._offsets: tuple[int, ...] = ()
         self._lengths: tuple[int, ...] = ()
+        self._cut = _NO_CUT  # the body of _size bytes -> its pieces, by _lengths
         self._generation = -1
 
     def split(self, body: bytes) -> tuple[Sequence[Answer | None], list[int] | None]:
@@ -346,11 +348,13 @@ class AnswerSplitter:
                 if tuple(map(len, last)) != self._lengths:
                     return self._split_anew(body), None
                 self._generation = memo.generation
-            offsets = self._offsets
-            # Each last piece compared in place (no slicing): which subpackets are not what they were.
-            moved = list(compress(self._indices, map(not_, map(body.startswith, last, offsets))))
+            # The body cut into its pieces at the known offsets (one unpack), each compared with its last piece:
+            # which subpackets are not what they were.
+            new = self._cut.unpack(body)
+            moved = list(compress(self._indices, map(ne, new, last)))
             if not moved:
                 return (), moved
+            offsets = self._offsets
             lengths, echoes = self._lengths, self._echoes
             parsed = []
             for index in moved:
@@ -363,8 +367,7 @@ class AnswerSplitter:
                 pieces, slots = memo.pieces, self._slots
                 for index, answer in zip(moved, parsed, strict=True):
                     answers[index] = answer
-                    start = offsets[index]
-                    pieces[slots[index]] = body[start : start + lengths[index]]
+                    pieces[slots[index]] = new[index]
                 return answers, moved
         return self._split_anew(body), None
 
@@ -390,8 +393,24 @@ class AnswerSplitter:
             memo.generation += 1
         self._generation = memo.generation
         self._offsets, self._lengths = intern_ints(tuple(offsets)), intern_ints(tuple(lengths))
+        self._cut = _body_cut(self._lengths)
         self._size = len(body)
         return answers
+
+
+_NO_CUT = struct.Struct("")
+_CUTS: dict[tuple[int, ...], struct.Struct] = {}
+
+
+def _body_cut(lengths: tuple[int, ...]) -> struct.Struct:
+    """A struct that cuts a data response body (its count word, then subpackets of these lengths) into the
+    subpackets' bytes: one per layout, shared by every splitter that has it (INTERN_LIMIT bounds the cache)."""
+    found = _CUTS.get(lengths)
+    if found is None:
+        if len(_CUTS) >= INTERN_LIMIT:
+            _CUTS.clear()
+        found = _CUTS[lengths] = struct.Struct(">2x" + "".join(f"{length}s" for length in lengths))
+    return found
 
 
 _COUNT_WORDS: dict[int, bytes] = {}

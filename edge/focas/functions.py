@@ -1,6 +1,6 @@
 """The FOCAS function table: one declarative entry per function, shared by client and simulated CNC.
 
-Why one module (667 lines, past the ~600 of DESIGN.md §3): it is one table. About half of it is the private
+Why one module (676 lines, past the ~600 of DESIGN.md §3): it is one table. About half of it is the private
 payload codecs, each a few lines, each named by exactly one entry further down and by nothing else. Reading
 an entry beside its codec, and both beside docs/protocol.md, is how a layout gets checked; a second module
 would only turn 45 private helpers into a public API with one caller. Shared value encodings already live in
@@ -59,6 +59,9 @@ from edge.focas.model import (
 )
 from edge.focas.values import (
     ALL_AXES,
+    MAX_EXPONENT,
+    SCALED_LAYOUT,
+    SCALED_SIZE,
     SlotForm,
     c_string,
     decode_pmc,
@@ -298,7 +301,13 @@ def _progdir_encode(value: Sequence[ProgramDirEntry], req: RequestSubpacket, ctx
 
 
 def _scaled_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> float | None:
-    _need(payload, 8, "scaled value")
+    if len(payload) == SCALED_SIZE:  # the common shapes inline, as decode_scaled_list does (a feed every tick)
+        mantissa, _zero, base, exponent = SCALED_LAYOUT.unpack(payload)
+        if exponent == 0:
+            return float(mantissa)
+        if base == 10 and 0 < exponent <= MAX_EXPONENT:
+            return mantissa / 10**exponent
+    _need(payload, SCALED_SIZE, "scaled value")
     return decode_scaled(payload)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import abc
 import asyncio
 import logging
-from collections.abc import Sequence
+from collections.abc import Coroutine, Sequence
 from datetime import datetime
 from typing import Any, ClassVar, TypeVar
 
@@ -169,16 +169,12 @@ class CncSession(abc.ABC):
         return self.transport
 
     # ---- reads -----------------------------------------------------------------------------------
-    async def batch(self, items: Sequence[it.ReadItem]) -> list[ItemResult]:
-        """One result per item, in order: its value, or the FocasError that item alone raised."""
-        if not self._connected:
-            raise ConnectionLost(f"{self.describe()}: not connected")
-        lock = self._io_lock  # `async with`, without its two extra coroutines (a poller calls this per tick)
-        await lock.acquire()
-        try:
-            return await self._guarded(self._batch(items))
-        finally:
-            lock.release()
+    def batch(self, items: Sequence[it.ReadItem]) -> Coroutine[Any, Any, list[ItemResult]]:
+        """One result per item, in order: its value, or the FocasError that item alone raised.
+
+        Not a coroutine of its own: the request is awaited through one level less (every level of the await
+        chain is re-entered when the answer wakes the task, ten times a second per machine)."""
+        return self._locked(self._batch(items))
 
     async def read(self, item: it.ReadItem) -> Any:
         """One item; its error is raised."""
@@ -266,20 +262,39 @@ class CncSession(abc.ABC):
         return record
 
     async def _locked_write(self, operation: Any) -> None:
-        if not self._connected:
-            operation.close()
-            raise ConnectionLost(f"{self.describe()}: not connected")
-        async with self._io_lock:
-            await self._guarded(operation)
+        await self._locked(operation)
 
-    async def _guarded(self, operation: Any) -> Any:
-        """Apply the request timeout; on timeout or protocol trouble, reset the session (never wedge).
+    async def _locked(self, operation: Any) -> Any:
+        """Run one request (`operation`, a coroutine) alone on the session, under the request timeout; on
+        timeout or protocol trouble, reset the session (never wedge).
 
         The timeout is a deadline on the loop's shared wheel (edge.focas.deadline), not an
         asyncio.timeout: a poller runs this ten times a second per machine. Like asyncio.timeout (and
         unlike wait_for on Python 3.11), a cancellation from outside is never mistaken for a timeout and
         never swallowed, so a poller cannot survive its shutdown.
         """
+        if not self._connected:
+            operation.close()
+            raise ConnectionLost(f"{self.describe()}: not connected")
+        lock = self._io_lock  # `async with`, without its two extra coroutines (a poller's tick comes this way)
+        await lock.acquire()
+        try:
+            task, wheel, deadline, cancelling = self._arm()
+            try:
+                try:
+                    return await operation
+                finally:
+                    wheel.disarm(deadline)
+            except (asyncio.CancelledError, ConnectionLost, OSError, ProtocolError) as exc:
+                instead = await self._failed(exc, task, deadline, cancelling)
+                if instead is None:
+                    raise
+                raise instead from exc
+        finally:
+            lock.release()
+
+    def _arm(self) -> tuple[asyncio.Task[Any], DeadlineWheel, Deadline, int]:
+        """The request's deadline, armed on the loop's wheel for the current task."""
         task = asyncio.current_task()
         if task is None:  # pragma: no cover - always called from a task
             raise RuntimeError("CncSession requests must run in an asyncio task")
@@ -289,21 +304,18 @@ class CncSession(abc.ABC):
         deadline = Deadline()
         cancelling = task.cancelling()
         wheel.arm(deadline, task, self.timeout)
-        try:
-            try:
-                return await operation
-            finally:
-                wheel.disarm(deadline)
-        except asyncio.CancelledError as exc:
+        return task, wheel, deadline, cancelling
+
+    async def _failed(self, exc: BaseException, task: asyncio.Task[Any], deadline: Deadline,
+                      cancelling: int) -> BaseException | None:
+        """A request ended in `exc`: reset the session where it is broken; the error to raise instead (None:
+        `exc` itself). A cancellation from outside (shutdown) is not a timeout and resets nothing."""
+        if isinstance(exc, asyncio.CancelledError):
             if not deadline.expired or task.uncancel() > cancelling:
-                raise  # cancelled from outside (shutdown): not a timeout
+                return None
             await self.reset()
-            raise FocasTimeout(f"{self.describe()}: no complete answer within {self.timeout}s") from exc
-        except (ConnectionLost, OSError) as exc:
-            await self.reset()
-            if isinstance(exc, ConnectionLost):
-                raise
-            raise ConnectionLost(f"{self.describe()}: {exc}") from exc
-        except ProtocolError:
-            await self.reset()
-            raise
+            return FocasTimeout(f"{self.describe()}: no complete answer within {self.timeout}s")
+        await self.reset()
+        if isinstance(exc, OSError) and not isinstance(exc, ConnectionLost):
+            return ConnectionLost(f"{self.describe()}: {exc}")
+        return None

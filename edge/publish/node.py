@@ -27,7 +27,6 @@ log = logging.getLogger(__name__)
 NAMESPACE = "spBv1.0"
 _FORBIDDEN_ID_CHARS = frozenset("+/#")
 _by_timestamp = attrgetter("timestamp_ms")
-_name_of = attrgetter("name")
 _row_name = itemgetter(0)
 _row_timestamp = itemgetter(3)
 
@@ -356,7 +355,10 @@ class SparkplugNode:
 
     def _known(self, device_id: str, dev: DeviceTable, samples: Sequence[Sample]) -> Sequence[Sample]:
         specs = dev.layout.slots
-        if all(map(specs.__contains__, map(_name_of, samples))):
+        for s in samples:  # a plain loop: faster than all(map(...)) for a tick's handful of values
+            if s.name not in specs:
+                break
+        else:
             return samples
         known = []
         for s in samples:

@@ -29,8 +29,11 @@ class Outputs:
 
     async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
         await self.publisher.device_data(device_id, samples)
-        for output in self.others:
-            await self._guard(output.device_data(device_id, samples), output, device_id)
+        for output in self.others:  # _guard, inline: every poll tick with a change comes this way
+            try:
+                await output.device_data(device_id, samples)
+            except Exception:
+                log.exception("output failed, skipped output=%s machine=%s", type(output).__name__, device_id)
 
     async def device_events(self, device_id: str, events: Sequence[Sample]) -> None:
         await self.publisher.device_events(device_id, events)

@@ -331,17 +331,23 @@ class TrendRecorder:
         if birth:
             trend.inputs.pop(AVAILABILITY, None)  # the session is back: the birth says the rest
         state_changed = birth
+        kinds = _KINDS
         for sample in samples:
             name = sample.name
-            if name in STATE_INPUTS:
+            kind = kinds.get(name)
+            if kind is None:
+                kind = _kind_of(name)
+            if not kind:  # most of a tick's values (positions, speeds, macros): nothing a trend shows
+                continue
+            if kind == _STATE:
                 trend.inputs[name] = sample.value
                 state_changed = True
-            elif name in SPARK_SERIES:
+            elif kind == _SPARK:
                 value = sample.value
                 trend.sparks[name].record(now, float(value) if isinstance(value, int | float) else None)
-            elif name.startswith(UTILISATION_PREFIX):
+            elif kind == _UTILISATION:
                 trend.utilisation[name[len(UTILISATION_PREFIX):]] = sample.value
-            elif name == ALARM_EVENT:
+            else:
                 note = _alarm_note(sample)
                 if note is not None:
                     trend.alarms.append(note)
@@ -364,6 +370,20 @@ class TrendRecorder:
         trend.set_band(now, Band.OFFLINE)
         for spark in trend.sparks.values():
             spark.record(now, None)
+
+
+_OTHER, _STATE, _SPARK, _UTILISATION, _EVENT = range(5)
+KINDS_LIMIT = 65536  # distinct metric names classified and kept; a fleet of a few models has a few hundred
+_KINDS: dict[str, int] = {}  # metric name -> what observe does with it (asked once per name, not per value)
+
+
+def _kind_of(name: str) -> int:
+    kind = (_STATE if name in STATE_INPUTS else _SPARK if name in SPARK_SERIES
+            else _UTILISATION if name.startswith(UTILISATION_PREFIX) else _EVENT if name == ALARM_EVENT else _OTHER)
+    if len(_KINDS) >= KINDS_LIMIT:
+        _KINDS.clear()
+    _KINDS[name] = kind
+    return kind
 
 
 def _alarm_note(sample: Sample) -> AlarmNote | None:
