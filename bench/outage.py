@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -159,7 +160,7 @@ def run_outage(machines: int, period_s: float, outage_s: float, after_s: float) 
 
 
 def _tidy(workdir: Path, outcome: dict[str, Any]) -> None:
-    if outcome.get("lost") == 0 and outcome.get("daemon_exit") == 0:
+    if outcome.get("lost") == 0 and outcome.get("daemon_exit") == 0 and not os.environ.get("BENCH_KEEP_WORKDIR"):
         shutil.rmtree(workdir, ignore_errors=True)
     else:
         print(f"  outage: logs kept in {workdir}", flush=True)
@@ -167,6 +168,7 @@ def _tidy(workdir: Path, outcome: dict[str, Any]) -> None:
 
 def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, child: SoakChild, machines: int,
             period_s: float, outage_s: float, after_s: float) -> dict[str, Any]:
+    _probe(child)  # SOAK_MEMORY_DIR: tracing starts here (tests/soak/memory_probe.py)
     before = dict(child.last)
     live_before = checker.rate(checker.live, time.time() - 10, time.time())
     killed = time.time()
@@ -179,12 +181,15 @@ def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, chil
     wait_until(lambda: checker.subscribed.is_set(), 30, "the checker resubscribed")
     relay.open()  # only now can the daemon reach the broker: the checker misses nothing it sends
     back = time.time()
+    _probe(child)
     wait_until(lambda: child.last.get("born") and child.last["time"] > back, 60, "the daemon reborn")
     born = next(r["time"] for r in child.reports if r["time"] > back and r.get("born"))
     wait_until(lambda: child.last["time"] > born and child.last.get("spool_rows") == 0, 900, "the spool drained")
     cleared = child.last["time"]
+    _probe(child)
     time.sleep(after_s)
     after = dict(child.last)
+    _probe(child)
     backlog = sum(n for s, n in checker.backlog.items() if s >= int(back))
     replay_s = max(cleared - born, REPORT_S)
     replay_rate = backlog / replay_s
@@ -202,6 +207,12 @@ def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, chil
         "fds_after": after.get("fds"),
         "samples_dropped": after.get("samples_dropped", 0),
     }
+
+
+def _probe(child: SoakChild) -> None:
+    """With SOAK_MEMORY_DIR set, the child writes a memory probe (tests/soak/memory_probe.py)."""
+    if os.environ.get("SOAK_MEMORY_DIR"):
+        child.proc.send_signal(signal.SIGUSR1)
 
 
 def _losses(keys: Path, checker: ArrivalCounter) -> dict[str, Any]:
@@ -235,6 +246,6 @@ def run(machines: int | None = None, period_s: float | None = None, outage_s: fl
     result.notes.append("values = Sparkplug metrics delivered (dedup keys); live rate over the 10 s before the "
                         "outage; replay = the daemon reborn to its spool empty (reports every "
                         f"{REPORT_S:g} s), reconnect = broker back to the daemon reborn (while the broker is "
-                        "down the daemon retries within reconnect_probe_s, 1 s, jittered)")
+                        "down the daemon retries within reconnect_probe_s, 0.5 s, jittered)")
     return result
 

@@ -43,9 +43,10 @@ SHAPE = ([("Position/X", MetricType.DOUBLE), ("Position/Y", MetricType.DOUBLE), 
 
 class PacketConn:
     """Connected; builds every QoS 0 packet as the fast path does (`keep`: and keeps the payloads); every
-    barrier is acknowledged at once."""
+    barrier is acknowledged at once; the socket takes every byte at once."""
 
     connected = True
+    held = 0
 
     def __init__(self, keep: bool = False) -> None:
         self._topics = mqtt_wire.TopicCache(v5=False)

@@ -12,7 +12,7 @@ What this adds to paho:
 - reconnect delays that grow exponentially to a cap, each drawn with jitter so a fleet does not reconnect in
   lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off). While
   nobody listens at the broker's port (refused, unreachable: the broker never sees such an attempt) the
-  delay is capped at `reconnect_probe_s` (~1 s, jittered), so a broker back from an outage is reached within
+  delay is capped at `reconnect_probe_s` (0.5 s, jittered), so a broker back from an outage is reached within
   a second, not after a backoff grown to `reconnect_max_s`; a broker that answers and refuses keeps the
   growing backoff;
 - `on_lost(lasted_s, reason)` for a session the broker ended and we did not, told at the next CONNACK and
@@ -52,6 +52,11 @@ from edge.publish.settings import PublishSettings
 
 log = logging.getLogger(__name__)
 
+# QoS 0 packets of one loop turn are handed to paho in writes of about this size. paho copies the rest of a
+# write after every partial send (`packet[pos:]`), so one write of a whole turn (the 1,000 DBIRTHs after a
+# reconnect, a replay's slice: megabytes) was copied again for every send the kernel cut short, and left
+# blocks of megabytes to the C allocator (docs/performance.md, "Broker outage at 1,000 machines").
+RAW_WRITE_BYTES = 64 * 1024
 MISC_INTERVAL_S = 1.0  # keepalive housekeeping (paho's loop_misc); keepalives are whole seconds
 CONNECT_TIMEOUT_S = 5.0  # TCP connect + TLS handshake of one attempt
 
@@ -136,6 +141,8 @@ class MqttConnection:
         self._attempt_reported = False  # this attempt's failure is logged already
         self._pending: dict[int, asyncio.Future[Any]] = {}
         self._batch: list[bytes] = []  # QoS 0 PUBLISH packets of this loop turn, for the watched socket
+        self._batch_bytes = 0
+        self._room_waiters: list[asyncio.Future[None]] = []  # wait_for_room()
         self._topics = mqtt_wire.TopicCache(v5=self._v5)
         if not mqtt_wire.AVAILABLE:
             log.warning("raw QoS 0 PUBLISH fast path off, paho publishes every message (slower) "
@@ -286,6 +293,8 @@ class MqttConnection:
         """Stop watching the current socket (before paho closes it, so a reused fd number is never ours)."""
         sock, self._watched = self._watched, None
         self._batch.clear()  # never sent on another connection: its seq numbers belong to this one
+        self._batch_bytes = 0
+        self._wake_room_waiters()
         if self._misc_handle is not None:
             self._misc_handle.cancel()
             self._misc_handle = None
@@ -310,6 +319,8 @@ class MqttConnection:
         # TLS may hold decrypted bytes the kernel no longer reports: read them now.
         while rc == MQTTErrorCode.MQTT_ERR_SUCCESS and _tls_pending(client.socket()):
             rc = client.loop_read()
+        if self._room_waiters:  # PUBACKs free QoS 1 messages
+            self._wake_room_waiters()
 
     def _flush(self, client: paho.Client) -> None:
         """Write what paho queued (all messages published since the last flush); if the kernel buffer
@@ -318,6 +329,7 @@ class MqttConnection:
         if sock is None or client.socket() is not sock:
             self._flush_scheduled = False
             self._batch.clear()
+            self._batch_bytes = 0
             return
         self._queue_batch(client)  # still marked scheduled: paho's write request adds no second flush
         self._flush_scheduled = False
@@ -325,6 +337,8 @@ class MqttConnection:
         if client.want_write() and self._watched is sock and not self._writer_added and self._loop is not None:
             self._loop.add_writer(sock, self._flush, client)
             self._writer_added = True
+        if self._room_waiters:
+            self._wake_room_waiters()
 
     def _schedule_flush(self, client: paho.Client) -> None:
         if not self._flush_scheduled and self._loop is not None:
@@ -350,7 +364,9 @@ class MqttConnection:
         if qos == 0 and properties is None and type(payload) is bytes and self._watched is not None:
             prefix = self._topics.prefix(topic, retain)
             if prefix is not None:
-                self._batch.append(mqtt_wire.publish_packet(prefix, payload))
+                packet = mqtt_wire.publish_packet(prefix, payload)
+                self._batch.append(packet)
+                self._batch_bytes += len(packet)
                 self._schedule_flush(client)
                 return True
         self._queue_batch(client)
@@ -358,12 +374,47 @@ class MqttConnection:
         return info.rc == MQTTErrorCode.MQTT_ERR_SUCCESS
 
     def _queue_batch(self, client: paho.Client) -> None:
-        """Hand this turn's QoS 0 packets to paho as one write, ahead of anything paho queues next."""
-        if not self._batch:
+        """Hand this turn's QoS 0 packets to paho, ahead of anything paho queues next, in writes of about
+        RAW_WRITE_BYTES (one write when the turn's packets are fewer)."""
+        batch = self._batch
+        if not batch:
             return
-        data = b"".join(self._batch)
-        self._batch.clear()
-        mqtt_wire.queue_raw(client, data)
+        if self._batch_bytes <= RAW_WRITE_BYTES:
+            mqtt_wire.queue_raw(client, b"".join(batch) if len(batch) > 1 else batch[0])
+        else:
+            start, size = 0, 0
+            for end, packet in enumerate(batch, 1):
+                size += len(packet)
+                if size >= RAW_WRITE_BYTES:
+                    mqtt_wire.queue_raw(client, b"".join(batch[start:end]))
+                    start, size = end, 0
+            if start < len(batch):
+                mqtt_wire.queue_raw(client, b"".join(batch[start:]))
+        batch.clear()
+        self._batch_bytes = 0
+
+    @property
+    def held(self) -> int:
+        """Bytes this connection holds for the broker: this turn's packets, what the kernel has not taken,
+        QoS 1 messages not yet acknowledged."""
+        client = self._client
+        return self._batch_bytes + (mqtt_wire.held_bytes(client) if client is not None else 0)
+
+    async def wait_for_room(self, limit: int) -> None:
+        """Return once at most `limit` bytes are held (`held`), or the socket is gone (the caller checks
+        the connection): a bulk sender (the replay) goes at the pace the broker takes its messages, instead
+        of queueing them in memory."""
+        loop = asyncio.get_running_loop()
+        while self._watched is not None and self.held > limit:
+            waiter: asyncio.Future[None] = loop.create_future()
+            self._room_waiters.append(waiter)
+            await waiter
+
+    def _wake_room_waiters(self) -> None:
+        waiters, self._room_waiters = self._room_waiters, []
+        for waiter in waiters:
+            if not waiter.done():
+                waiter.set_result(None)
 
     async def publish_confirmed(self, topic: str, payload: bytes, *, qos: int = 1, retain: bool = False,
                                 timeout: float = 5.0) -> None:

@@ -98,3 +98,14 @@ def publish_packet(prefix: Prefix, payload: bytes) -> bytes:
 def queue_raw(client: paho.Client, data: bytes) -> None:
     """Append already-encoded packets to paho's write queue (it writes them in order with its own)."""
     client._packet_queue(0, data, 0, 0)
+
+
+def held_bytes(client: paho.Client) -> int:
+    """Bytes paho holds for the broker: its write queue's not yet taken by the kernel, and the payloads of
+    QoS 1 messages not yet acknowledged (sent, or queued behind paho's in-flight limit). Its private
+    queues; 0 if they have another shape (then nothing waits for them to drain)."""
+    try:
+        return (sum(packet["to_process"] for packet in client._out_packet)
+                + sum(len(message.payload) for message in client._out_messages.values()))
+    except (AttributeError, KeyError, TypeError):
+        return 0

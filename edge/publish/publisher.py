@@ -105,6 +105,17 @@ class Publisher:
         self._handlers.json = handler
 
     @property
+    def after_replay(self) -> Callable[[], object] | None:
+        """Called when a replay has emptied the spool (its rows, packets and steps are garbage then)."""
+        return self._spb.replay.after_replay
+
+    @after_replay.setter
+    def after_replay(self, hook: Callable[[], object] | None) -> None:
+        self._spb.replay.after_replay = hook
+        if self._json is not None:
+            self._json.replay.after_replay = hook
+
+    @property
     def node_metrics_source(self) -> Callable[[], Sequence[Sample]] | None:
         """The gateway's metrics as of now, read again for every NBIRTH."""
         return self._spb.node_metrics_source

@@ -1,8 +1,8 @@
 """Replaying the spool after a reconnect: oldest first, paced, as historical messages.
 
-The pace is replay_live_factor (12) times the rate the rows were spooled at, at least replay_rows_per_s: a
+The pace is replay_live_factor (18) times the rate the rows were spooled at, at least replay_rows_per_s: a
 backlog clears in a tenth of the outage that made it, and the live ticks get the loop between chunks.
-Sparkplug sends a step's rows of one device (~6 at that pace) in one DDATA, every metric is_historical with
+Sparkplug sends a step's rows of one device (~9 at that pace) in one DDATA, every metric is_historical with
 its own timestamp (what the spec's is_historical is for: "batching, store and forward"), encoded from the
 parsed rows without a Sample per value; JSON sends a message per value.
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from operator import attrgetter
 from typing import Any, Protocol
@@ -37,12 +37,18 @@ from edge.samples import Sample
 log = logging.getLogger(__name__)
 _historical_of = attrgetter("historical")
 
-# A replay step fetches (and confirms with one barrier) about this many seconds of rows: at 12x the live rate
-# that is ~6 s of spooled ticks, so Sparkplug sends a device's ~6 rows of a step in one DDATA.
+# A replay step fetches (and confirms with one barrier) about this many seconds of rows: at 18x the live rate
+# that is ~9 s of spooled ticks, so Sparkplug sends a device's ~9 rows of a step in one DDATA.
 FETCH_S = 0.5
 # A replay sending one message per value (JSON) fetches less: its step's messages wait in the MQTT client's
 # queue until the socket takes them, and 0.5 s of them (12 values a row) held ~15 MB at 20 machines in the soak.
 FETCH_EACH_S = 0.1
+# Steps whose barrier has not come back yet, at most (the oldest is awaited before another goes out).
+IN_FLIGHT = 3
+# The replay waits while the MQTT connection holds more than this many bytes for the broker (not yet taken by
+# the kernel, or QoS 1 not yet acknowledged): a broker slower than the pace then slows the replay instead of
+# filling the process's memory.
+HELD_BYTES = 1024 * 1024
 MERGE_ROWS = 16  # spool rows of one device in one replayed DDATA at most (~5 kB at 12 values a row)
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work at least, not each chunk
 MAX_SLICE_S = 0.1  # and after this much at most (what a live tick may wait for the replay)
@@ -83,6 +89,8 @@ class Replayer:
         self._from_rows = getattr(target, "historical_rows", None)  # Sparkplug: parsed rows to messages
         self._replaying = False
         self._again = False  # a kick came while replaying: look for rows once more before ending
+        # Called when a replay has emptied the spool (the daemon gives the C heap's free pages back then).
+        self.after_replay: Callable[[], object] | None = None
 
     def kick(self) -> None:
         """Start replaying the spool (or make the running replay look again)."""
@@ -128,6 +136,9 @@ class Replayer:
         started = time.monotonic()
         sent_rows = 0
         pacer = _Pacer(started, rate, link.policy.replay_batch)
+        waiting = spool.pending(fmt)
+        if waiting:
+            log.info("spool replay started format=%s rows=%d rows_per_s=%.0f", fmt, waiting, rate)
 
         def current() -> bool:
             return (session == link.session and conn.connected and not link.suspect
@@ -147,18 +158,24 @@ class Replayer:
             sent_rows += len(step.done)
             return True
 
-        # One barrier in flight while the next step goes out: a PUBACK from a busy broker takes a good part
-        # of a step (~40 % of the replay's time at 1,000 machines when each step waited for its own).
-        inflight: tuple[asyncio.Future[bool], _Step] | None = None
+        # Up to IN_FLIGHT steps' barriers in flight while the next step goes out: a PUBACK from a busy broker
+        # takes a good part of a step (~40 % of the replay's time at 1,000 machines when each step waited for
+        # its own). What is in flight costs no memory here: the steps' bytes wait in the kernel and the
+        # broker, not in the MQTT client (`_room`), and a step in flight keeps only its row ids.
+        window: deque[tuple[asyncio.Future[bool], _Step]] = deque()
         after = 0  # the rows up to here are sent (and in flight or acked)
         try:
             while current():
+                while window and (window[0][0].done() or len(window) >= IN_FLIGHT):
+                    if not await confirmed(*window.popleft()):
+                        return
+                if not current():
+                    return
                 entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
                                        after=after)
                 if not entries:
-                    if inflight is not None:
-                        pending, inflight = inflight, None
-                        if not await confirmed(*pending):
+                    if window:
+                        if not await confirmed(*window.popleft()):
                             return
                         continue
                     if self._again:  # a device born meanwhile may have rows before `after`
@@ -175,22 +192,20 @@ class Replayer:
                 if not ok:
                     return
                 await pacer.pace(force=True)
-                if inflight is not None:
-                    pending, inflight = inflight, None
-                    if not await confirmed(*pending):
-                        return
                 if not current():
                     return
-                inflight = (asyncio.ensure_future(link.barrier(conn)), step)
+                window.append((asyncio.ensure_future(link.barrier(conn)), step))
         finally:
-            if inflight is not None:
-                inflight[0].cancel()  # the session ended: its rows stay in the spool
+            for barrier, _ in window:
+                barrier.cancel()  # the session ended: their rows stay in the spool
         left = spool.pending(fmt)
         if delivered is not None and not left:
             delivered.forget()
         if sent_rows:
             log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
                      time.monotonic() - started, left)
+            if not left and self.after_replay is not None:
+                self.after_replay()
 
     def _due(self, step: _Step, entry: Any) -> bool:
         """The entry is this step's to send: its device is still born and no earlier replay sent it (then
@@ -206,7 +221,7 @@ class Replayer:
             if self._due(step, entry) and not self._send_samples(step, entry):
                 return False
             if pacer.counted(1):
-                await pacer.pace()
+                await self._pace(step, pacer)
         return True
 
     async def _send_by_device(self, step: _Step, entries: Sequence[Any], pacer: _Pacer) -> bool:
@@ -234,7 +249,7 @@ class Replayer:
                 if not self._send_rows(step, merged):
                     return False
                 if pacer.counted(len(part)):
-                    await pacer.pace()
+                    await self._pace(step, pacer)
         return True
 
     def _send_rows(self, step: _Step, merged: list[tuple[Any, list[Any]]]) -> bool:
@@ -278,6 +293,15 @@ class Replayer:
             delivered.record_row(entry.id)
             step.with_samples.append(entry)
         return True
+
+    @staticmethod
+    async def _pace(step: _Step, pacer: _Pacer) -> None:
+        """At a chunk boundary: keep to the pace, and wait while the MQTT connection holds more than
+        HELD_BYTES for the broker (it is slower than the pace)."""
+        if step.conn.held > HELD_BYTES:
+            await step.conn.wait_for_room(HELD_BYTES // 2)
+            pacer.resumed()
+        await pacer.pace()
 
     def _send(self, step: _Step, messages: Sequence[Outgoing]) -> bool:
         link = self._link
@@ -338,6 +362,10 @@ class _Pacer:
         before = self.rows
         self.rows += rows
         return before // self._chunk != self.rows // self._chunk
+
+    def resumed(self) -> None:
+        """The replay gave the loop away (not in `pace`): its slice of work starts again now."""
+        self._slice_from = time.monotonic()
 
     async def pace(self, force: bool = False) -> bool:
         """Sleep if ahead of the pace, yield if the slice is spent (or `force`); True if it gave the loop

@@ -42,6 +42,6 @@ class PublishSettings:
     reconnect_max_s: float = 10.0  # cap of the retry delay (jitter: each delay is drawn in [d/2, d])
     # Cap of the delay while nobody listens at the broker's port (refused, unreachable): such attempts cost
     # the broker nothing, and a broker back from an outage is then reached within this (jittered) delay.
-    reconnect_probe_s: float = 1.0
+    reconnect_probe_s: float = 0.5
     rebirth_min_interval_s: float = 1.0  # rebirth requests inside this window after a rebirth coalesce
     connect_timeout_s: float = 10.0  # SUBACK wait before a session is considered broken

@@ -16,7 +16,7 @@ What lives here:
     value_freshness a value's age and whether it can still be called GOOD (status page and status.json)
     sdnotify      READY/RELOADING/STOPPING/WATCHDOG/STATUS to systemd
     gc_tuning     the garbage collector's settings for a long-running daemon
-    heap_trim     the C heap's free pages back to the system after start-up and reloads (glibc malloc_trim)
+    heap_trim     the C heap's free pages back to the system after start-up, reloads and replays (malloc_trim)
     blocking_pool the daemon's named, bounded pool for its few blocking calls (the loop's default executor)
     logformat     text or JSON log lines (every subcommand uses it)
 

@@ -1,4 +1,5 @@
-"""Give the C heap's free pages back to the system after start-up and reloads (glibc's malloc_trim).
+"""Give the C heap's free pages back to the system after start-up, reloads and a spool replay (glibc's
+malloc_trim).
 
 Start-up allocates far more than it keeps: the config's parse, each machine's static reads, plans and
 births. Python's own allocator unmaps an arena once it is empty, but objects over 512 bytes (dict tables,

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from edge.publish import Publisher, PublishSettings
-from edge.publish.mqtt import MqttConnection, backoff_delay
+from edge.publish import Publisher, PublishSettings, mqtt_wire
+from edge.publish.mqtt import RAW_WRITE_BYTES, MqttConnection, backoff_delay
 from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
 from tests.integration.mqtt_observer import Observer
 
@@ -207,6 +207,43 @@ async def test_qos0_batches_keep_publish_order_with_paho_packets_and_retain(
         assert late.on("order/retained")[0].retain and late.on("order/retained")[0].payload == b"kept"
     finally:
         late.close()
+
+
+async def test_a_turn_of_megabytes_goes_out_in_bounded_writes_in_order_and_room_is_waited_for(
+        mosquitto: Mosquitto, tmp_path: Path) -> None:
+    """A loop turn's QoS 0 packets (1,000 DBIRTHs after a reconnect, a replay's slice) reach paho as writes
+    of about RAW_WRITE_BYTES, not one of megabytes that paho copies again after every partial send; they
+    arrive whole and in order; `wait_for_room` returns once the kernel has taken what was queued."""
+    connected = asyncio.Event()
+    conn = MqttConnection(settings(mosquitto, tmp_path), "bulk-test", before_connect=lambda unsent: None,
+                          on_connected=lambda tag: connected.set(), on_disconnected=lambda: None,
+                          on_message=lambda msg: None)
+    observer = Observer(mosquitto, ("bulk/#",))
+    conn.start()
+    try:
+        await asyncio.wait_for(connected.wait(), 10)
+        writes: list[int] = []
+        queue = mqtt_wire.queue_raw
+
+        def counted(client: object, data: bytes) -> None:
+            writes.append(len(data))
+            queue(client, data)  # type: ignore[arg-type]
+
+        sent = [i.to_bytes(4, "big") * 1250 for i in range(800)]  # 5 kB each, 4 MB in one turn
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(mqtt_wire, "queue_raw", counted)
+            for payload in sent:
+                assert conn.publish("bulk/x", payload)
+            assert conn.held >= sum(map(len, sent))
+            await asyncio.wait_for(conn.wait_for_room(0), 30)
+        assert conn.held == 0
+        assert len(writes) > 1 and max(writes) < RAW_WRITE_BYTES + 5100
+        await async_wait_for(lambda: len(observer.on("bulk/x")) == len(sent), timeout=30,
+                             message="all 800 messages")
+        assert [m.payload for m in observer.on("bulk/x")] == sent
+    finally:
+        await conn.stop()
+        observer.close()
 
 
 async def test_wildcard_topic_still_refused_by_paho(mosquitto: Mosquitto, tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import signal
 import sys
 import threading
 import time
@@ -23,6 +24,8 @@ from edge.config import load_config
 from edge.samples import Sample
 from edge.service.blocking_pool import blocking_pool_threads
 from edge.service.daemon import Daemon
+from edge.service.gc_tuning import CollectorKeeper, tune_collector
+from tests.soak.memory_probe import from_environment, heap
 
 REPORT_EVERY_S = float(os.environ.get("SOAK_REPORT_S", "5"))  # bench/outage.py asks for 0.5
 
@@ -55,6 +58,9 @@ def spy(daemon: Daemon, out: IO[str]) -> None:
 
 
 async def report(daemon: Daemon, started: float) -> None:
+    probing = from_environment()
+    if probing is not None:
+        asyncio.get_running_loop().add_signal_handler(signal.SIGUSR1, probing.probe)
     while True:
         counters = daemon.publisher.counters
         line = {"t": round(time.monotonic() - started, 1), "rss": rss_bytes(),
@@ -65,6 +71,9 @@ async def report(daemon: Daemon, started: float) -> None:
                 "suspect_dead": counters.get("suspect_dead", 0), "replayed_rows": counters.get("replayed_rows", 0),
                 "samples_dropped": counters.get("samples_dropped", 0),
                 "online": sum(1 for p in daemon.pollers.values() if p.online), "born": daemon.publisher.ready}
+        if probing is not None:
+            line.update(heap())
+            probing.reports.write(json.dumps({"time": time.time(), **line}) + "\n")
         print(json.dumps(line), flush=True)
         await asyncio.sleep(REPORT_EVERY_S)
 
@@ -72,6 +81,10 @@ async def report(daemon: Daemon, started: float) -> None:
 async def main(config: Path, keys: Path) -> int:
     with keys.open("a", buffering=1 << 16) as out:
         daemon = Daemon(load_config(config), config)
+        # The collector set up as `focas-edge run` has it (edge.service.daemon.run_daemon): without it, a
+        # 1,000-machine replay met full collections over the whole fleet's objects, which production never does.
+        daemon.collector = CollectorKeeper(lambda: all(p.online for p in daemon.pollers.values()))
+        tune_collector()
         spy(daemon, out)
         reporter = asyncio.create_task(report(daemon, time.monotonic()))
         try:

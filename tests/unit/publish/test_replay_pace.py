@@ -46,6 +46,7 @@ class Clock:
 
 class Conn:
     connected = True
+    held = 0  # the socket takes every byte at once
 
 
 class Link:
@@ -164,3 +165,135 @@ def test_behind_its_pace_the_replay_takes_a_slice_as_long_as_the_live_turn(monke
     work = ROWS * clock.row_s
     assert clock.yields <= per_step * link.barriers + math.ceil(work / replay.MAX_SLICE_S) + 2
     assert clock.yields < math.ceil(work / replay.SLICE_S)
+
+
+class HeldBarriers(Link):
+    """A broker whose PUBACKs come only when the test releases them, oldest first."""
+
+    def __init__(self, clock: Clock) -> None:
+        super().__init__(clock)
+        self.waiting: list[asyncio.Future[bool]] = []
+
+    async def barrier(self, conn: Any) -> bool:
+        self.barriers += 1
+        answer: asyncio.Future[bool] = asyncio.get_running_loop().create_future()
+        self.waiting.append(answer)
+        return await answer
+
+    def in_flight(self) -> int:
+        return sum(not answer.done() for answer in self.waiting)
+
+
+async def _settle() -> None:
+    for _ in range(200):
+        await _yield(0)
+
+
+def test_several_steps_go_out_before_the_first_barrier_returns_and_rows_leave_only_with_their_barrier(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A slow PUBACK does not stop the replay at the next step: up to IN_FLIGHT steps are out, unconfirmed;
+    a step's rows leave the spool when its own barrier comes back, never before, and a step more goes out."""
+    clock = Clock()
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    step = int(RATE * replay.FETCH_EACH_S)
+
+    async def scenario() -> None:
+        link, spool = HeldBarriers(clock), Spool()
+        replayer = Replayer(link, Target(), spool, Counter(), BackgroundTasks())  # type: ignore[arg-type]
+        replayer.kick()
+        await _settle()
+        assert link.in_flight() == replay.IN_FLIGHT and link.sent == replay.IN_FLIGHT * step
+        assert len(spool.rows) == ROWS  # nothing confirmed, nothing acknowledged
+        link.waiting[0].set_result(True)
+        await _settle()
+        assert [r.id for r in spool.rows][:1] == [step + 1]  # the first step's rows only
+        assert link.in_flight() == replay.IN_FLIGHT and link.sent == (replay.IN_FLIGHT + 1) * step
+        while replayer._replaying:
+            for answer in link.waiting:
+                if not answer.done():
+                    answer.set_result(True)
+            await _settle()
+        assert spool.rows == [] and link.sent == ROWS
+
+    asyncio.run(scenario())
+
+
+class SlowSocket(Conn):
+    """The kernel takes the client's bytes only when the replay waits for room."""
+
+    def __init__(self) -> None:
+        self.held = 0
+        self.most = 0
+        self.waits: list[int] = []
+
+    async def wait_for_room(self, limit: int) -> None:
+        self.waits.append(limit)
+        self.held = 0
+        await _yield(0)
+
+
+def test_the_replay_waits_while_the_mqtt_client_holds_more_than_its_bound(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A broker slower than the pace: the bytes the socket has not taken stay within HELD_BYTES and a
+    chunk, instead of a step's worth (JSON's 0.5 s steps queued ~12,000 messages in paho)."""
+    clock = Clock()
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    bound = 120
+    monkeypatch.setattr(replay, "HELD_BYTES", bound)
+    message = len(b"x")
+
+    async def scenario() -> tuple[Link, Spool, SlowSocket]:
+        link, spool = Link(clock), Spool()
+        socket = SlowSocket()
+        link.conn = socket
+        sent = link.send
+
+        def send(conn: Any, messages: Sequence[Outgoing]) -> bool:
+            socket.held += message * len(messages)
+            socket.most = max(socket.most, socket.held)
+            return sent(conn, messages)
+
+        link.send = send  # type: ignore[method-assign]
+        replayer = Replayer(link, Target(), spool, Counter(), BackgroundTasks())  # type: ignore[arg-type]
+        replayer.kick()
+        while replayer._replaying:
+            await _yield(0)
+        return link, spool, socket
+
+    link, spool, socket = asyncio.run(scenario())
+    assert spool.rows == [] and link.sent == ROWS
+    assert socket.waits and set(socket.waits) == {bound // 2}
+    assert socket.most <= bound + link.policy.replay_batch * message
+
+
+def test_a_replay_that_empties_the_spool_calls_its_after_replay_hook_and_one_cut_short_does_not(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The daemon gives the C heap's free pages back after a replay (edge.service.heap_trim): once the spool
+    is empty, not while rows wait for the next session."""
+    clock = Clock()
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+
+    async def scenario(cut_short: bool) -> tuple[list[int], Spool]:
+        link, spool = HeldBarriers(clock), Spool()
+        replayer = Replayer(link, Target(), spool, Counter(), BackgroundTasks())  # type: ignore[arg-type]
+        calls: list[int] = []
+        replayer.after_replay = lambda: calls.append(len(spool.rows))
+        replayer.kick()
+        await _settle()
+        link.waiting[0].set_result(True)
+        await _settle()
+        if cut_short:
+            link.session += 1  # the connection went: the steps in flight stay in the spool
+        while replayer._replaying:
+            for answer in link.waiting:
+                if not answer.done():
+                    answer.set_result(True)
+            await _settle()
+        return calls, spool
+
+    calls, spool = asyncio.run(scenario(cut_short=False))
+    assert spool.rows == [] and calls == [0]
+    calls, spool = asyncio.run(scenario(cut_short=True))
+    assert spool.rows and calls == []
