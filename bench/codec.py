@@ -12,7 +12,7 @@ from bench.workload import tick_items
 from edge.collect.changes import ChangeDetector
 from edge.focas import frame as fr
 from edge.focas import packed
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.model import AlarmHistoryEntry
 from edge.focas.native import item_result, plan_item
 from edge.focas.values import decode_scaled_list, encode_scaled_list

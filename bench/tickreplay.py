@@ -37,7 +37,7 @@ from edge.collect.tickgrid import TickGrid
 from edge.config import parse_config
 from edge.focas.client import FocasClient
 from edge.focas.frame import Frame
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.publish import mqtt_wire
 from edge.publish.aliases import AliasMap
 from edge.publish.forwarding import HeldBatch, Outbox

@@ -8,6 +8,7 @@ What lives here, bottom up:
     targets     "macro:500"-style addresses for reads and writes
     frame       native FOCAS/Ethernet framing: header, subpackets, incremental stream decoder
     values      native payload values: 8-byte scaled numbers, PMC elements, parameter records
+    function_entry  what one entry of that table is: Function (codecs of both directions), Context, Evidence
     functions   the native function table, shared by the client and the simulated CNC
     native      read items -> native subpackets, answers -> values
     packed      the packed-buffer surface (seeds 000-002): its codecs, and its framing, client and endpoint
@@ -22,7 +23,7 @@ What lives here, bottom up:
 Rules:
 
 1. focas imports nothing else from edge/ except the root ``edge.ConfigError`` (address parsing).
-2. The sans-IO modules (errors, model, items, targets, frame, values, functions, native, paths, the
+2. The sans-IO modules (errors, model, items, targets, frame, values, function_entry, functions, native, paths, the
    packed codecs and packed.frame) never import asyncio or sockets, nor a module that does; the simulator
    builds on them and never on the client modules.
 3. The client modules (deadline, session, client, routed, connect, probe, packed.client, packed.endpoint)

@@ -46,7 +46,7 @@ from edge.focas.frame import (
     intern_ints,
     slot_getter,
 )
-from edge.focas.functions import Context, Function, PayloadDecoder
+from edge.focas.function_entry import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
 from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, shared_plan_item
 from edge.focas.session import CncSession, ItemResult

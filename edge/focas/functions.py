@@ -1,11 +1,9 @@
 """The FOCAS function table: one declarative entry per function, shared by client and simulated CNC.
 
-Why one module (676 lines, past the ~600 of DESIGN.md §3): it is one table. About half of it is the private
-payload codecs, each a few lines, each named by exactly one entry further down and by nothing else. Reading
-an entry beside its codec, and both beside docs/protocol.md, is how a layout gets checked; a second module
-would only turn 45 private helpers into a public API with one caller. Shared value encodings already live in
-values.py and the frame in frame.py. Split it by area (as packed/ is) when it grows by another block of
-functions.
+What an entry is (Function, Context, Evidence) lives in function_entry.py; this module is the table and its
+private payload codecs, each a few lines and named by exactly one entry further down, so that an entry
+reads beside its codec, and both beside docs/protocol.md. Shared value encodings live in values.py and the
+frame in frame.py. Split the table by area (as packed/ is) when it grows by another block of functions.
 
 Like pymodbus' PDU table, the same entry builds and parses both directions, so the simulator can never
 disagree with the client about a layout. An entry knows its class (1 CNC, 2 PMC), command, the names of
@@ -37,15 +35,20 @@ the same one, which the client derives from sysinfo. Value types per function ar
 
 from __future__ import annotations
 
-import enum
 import struct
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from datetime import date, datetime, time
 from typing import Any
 
-from edge.focas.errors import ProtocolError, cnc_error
-from edge.focas.frame import CLASS_CNC, CLASS_PMC, RequestSubpacket, ResponseSubpacket
+from edge.focas.errors import ProtocolError
+from edge.focas.frame import CLASS_CNC, CLASS_PMC, RequestSubpacket
+from edge.focas.function_entry import (
+    Context,
+    Evidence,
+    Function,
+    PayloadDecoder,
+    PayloadEncoder,
+)
 from edge.focas.model import (
     PMC_AREAS,
     ActiveAlarm,
@@ -59,8 +62,6 @@ from edge.focas.model import (
 )
 from edge.focas.values import (
     ALL_AXES,
-    MAX_EXPONENT,
-    SCALED_LAYOUT,
     SCALED_SIZE,
     SlotForm,
     c_string,
@@ -75,91 +76,6 @@ from edge.focas.values import (
     pad_c_string,
     pmc_type,
 )
-
-
-class Evidence(enum.Enum):
-    """How well the public record pins a layout down (see docs/protocol.md)."""
-
-    CAPTURE = "capture"
-    DOC = "doc table"
-    CODE = "code only"
-
-
-@dataclass(frozen=True, slots=True)
-class Context:
-    """What a layout depends on beyond the bytes: the control's max_axis and record slot form."""
-
-    max_axis: int = 8
-    slot_form: SlotForm = SlotForm.FOUR_BYTE
-
-    @classmethod
-    def from_sysinfo(cls, info: SysInfo) -> Context:
-        form = SlotForm.SCALED if info.is_30i_style else SlotForm.FOUR_BYTE
-        return cls(max_axis=max(1, info.max_axis), slot_form=form)
-
-
-PayloadDecoder = Callable[[bytes, RequestSubpacket, Context], Any]
-PayloadEncoder = Callable[[Any, RequestSubpacket, Context], bytes]
-ExtraDecoder = Callable[[RequestSubpacket, Context], Any]
-
-
-def _empty_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> None:
-    return None
-
-
-def _empty_encode(value: Any, req: RequestSubpacket, ctx: Context) -> bytes:
-    return b""
-
-
-@dataclass(frozen=True, slots=True)
-class Function:
-    """One FOCAS function: identity, evidence, arg names, and the codecs of both directions."""
-
-    name: str
-    cls: int
-    command: int
-    evidence: Evidence
-    args: tuple[str, ...]
-    returns: str  # the typed value decode_payload gives and encode_payload takes
-    layout: str  # the response payload (or, for writes, the request extra) in one line
-    decode_payload: PayloadDecoder = _empty_decode
-    encode_payload: PayloadEncoder = _empty_encode
-    decode_extra: ExtraDecoder | None = None
-    notes: str = ""
-    aliases: tuple[str, ...] = field(default_factory=tuple)
-
-    @property
-    def is_write(self) -> bool:
-        return self.decode_extra is not None
-
-    def request(self, *args: int, extra: bytes = b"", arg5: int | None = None,
-                path: int = 1) -> RequestSubpacket:
-        """A request subpacket; args fill arg1.. in order, arg5 defaults to len(extra)."""
-        if len(args) > 4:
-            raise ValueError(f"{self.name}: at most 4 positional args (arg5 is the extra length)")
-        padded = list(args) + [0] * (4 - len(args))
-        a5 = len(extra) if arg5 is None else arg5
-        return RequestSubpacket(self.cls, self.command, (padded[0], padded[1], padded[2], padded[3], a5),
-                                extra, path)
-
-    def named_args(self, req: RequestSubpacket) -> dict[str, int]:
-        return dict(zip(self.args, req.args, strict=False))
-
-    def response(self, req: RequestSubpacket, value: Any, ctx: Context) -> ResponseSubpacket:
-        """Server side: the OK answer carrying `value`."""
-        return ResponseSubpacket(req.cls, req.command, 0, 0, self.encode_payload(value, req, ctx), req.path)
-
-    def decode_response(self, sub: ResponseSubpacket, req: RequestSubpacket, ctx: Context) -> Any:
-        """Client side: the typed value, or raise the CNC's error for this subpacket."""
-        if sub.rc != 0:
-            raise cnc_error(sub.rc, self.name, sub.detail)
-        return self.decode_payload(sub.payload, req, ctx)
-
-
-def error_response(req: RequestSubpacket, rc: int, detail: int = 0) -> ResponseSubpacket:
-    """Server side: a 16-byte error subpacket without payload (as the EDM capture shows for EW_FUNC)."""
-    return ResponseSubpacket(req.cls, req.command, rc, detail, b"", req.path)
-
 
 # ---- payload codecs -----------------------------------------------------------------------------------
 
@@ -301,12 +217,6 @@ def _progdir_encode(value: Sequence[ProgramDirEntry], req: RequestSubpacket, ctx
 
 
 def _scaled_decode(payload: bytes, req: RequestSubpacket, ctx: Context) -> float | None:
-    if len(payload) == SCALED_SIZE:  # the common shapes inline, as decode_scaled_list does (a feed every tick)
-        mantissa, _zero, base, exponent = SCALED_LAYOUT.unpack(payload)
-        if exponent == 0:
-            return float(mantissa)
-        if base == 10 and 0 < exponent <= MAX_EXPONENT:
-            return mantissa / 10**exponent
     _need(payload, SCALED_SIZE, "scaled value")
     return decode_scaled(payload)
 

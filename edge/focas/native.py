@@ -16,7 +16,7 @@ from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.errors import FocasError, NotSupported, OutOfRange, ProtocolError, cnc_error
 from edge.focas.frame import Answer, RequestSubpacket, ResponseSubpacket
-from edge.focas.functions import Context, Function, PayloadDecoder
+from edge.focas.function_entry import Context, Function, PayloadDecoder
 from edge.focas.values import SlotForm
 
 Combiner = Callable[[list[Any]], Any]

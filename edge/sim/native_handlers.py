@@ -32,7 +32,7 @@ from edge.focas.errors import (
     cnc_error,
 )
 from edge.focas.frame import RequestSubpacket, ResponseSubpacket
-from edge.focas.functions import Context, Function, error_response
+from edge.focas.function_entry import Context, Function, error_response
 from edge.focas.model import DIAG_TYPE_CODES, ParamType, PmcType
 from edge.sim.faults import FaultPlan
 from edge.sim.state import MachineState

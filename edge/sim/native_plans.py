@@ -28,7 +28,7 @@ from edge.focas.frame import (
     decode_request_chunk,
     request_chunks,
 )
-from edge.focas.functions import Context, Function, error_response
+from edge.focas.function_entry import Context, Function, error_response
 from edge.focas.model import ParamRecord, PmcType
 from edge.focas.values import RECORD_HEAD_LAYOUT, encode_scaled
 from edge.sim.native_handlers import HANDLERS, PMC_AREA_BY_CODE, function_name, read_pmc

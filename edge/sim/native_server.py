@@ -28,7 +28,8 @@ from edge.focas.frame import (
     encode_open_response,
     encode_response,
 )
-from edge.focas.functions import READ_CLOCK, Context
+from edge.focas.function_entry import Context
+from edge.focas.functions import READ_CLOCK
 from edge.sim.faults import GARBAGE, FaultPlan
 from edge.sim.native_handlers import answer_subpacket
 from edge.sim.native_plans import AnswerPlan, AnswerPlans, encode_planned_response

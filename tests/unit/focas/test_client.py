@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 from edge import ConfigError
+from edge.focas import function_entry as fe
 from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.client import FocasClient
@@ -38,7 +39,7 @@ from edge.focas.frame import (
     encode_open_response,
     encode_response,
 )
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.model import ParamRecord, PmcType, StatInfo, SysInfo
 from edge.focas.values import decode_pmc
 from tests.helpers import async_wait_for
@@ -131,16 +132,16 @@ class ScriptedCnc:
     def _answer_one(self, req: RequestSubpacket) -> ResponseSubpacket:
         function = fn.BY_COMMAND.get((req.cls, req.command))
         if function is None:
-            return fn.error_response(req, EW_FUNC)
+            return fe.error_response(req, EW_FUNC)
         if req.command in self.errors:
-            return fn.error_response(req, self.errors[req.command])
+            return fe.error_response(req, self.errors[req.command])
         if function.is_write:
             assert function.decode_extra is not None
             self.writes.append((function.name, function.decode_extra(req, self.ctx)))
             return function.response(req, None, self.ctx)
         return function.response(req, self._value(function, req), self.ctx)
 
-    def _value(self, function: fn.Function, req: RequestSubpacket) -> Any:
+    def _value(self, function: fe.Function, req: RequestSubpacket) -> Any:
         args = req.args
         if function is fn.SYSINFO:
             return self.sysinfo

@@ -26,7 +26,8 @@ from edge.focas.frame import (
     encode_response,
     split_response,
 )
-from edge.focas.functions import BY_COMMAND, Context
+from edge.focas.function_entry import Context
+from edge.focas.functions import BY_COMMAND
 from edge.focas.values import SlotForm
 
 u16 = st.integers(0, 0xFFFF)

@@ -11,11 +11,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from edge.focas import function_entry as fe
 from edge.focas import functions as fn
 from edge.focas import items as it
 from edge.focas.errors import AccessDenied, FunctionNotAvailable, NotSupported, OutOfRange, ProtocolError
 from edge.focas.frame import ResponseSubpacket
-from edge.focas.functions import Context, Function
+from edge.focas.function_entry import Context, Function
 from edge.focas.model import (
     ActiveAlarm,
     ExecProgram,
@@ -91,7 +92,7 @@ def test_every_read_function_has_a_round_trip() -> None:
 def test_table_is_unique_and_documented() -> None:
     assert len(fn.BY_COMMAND) == len(fn.FUNCTIONS)
     for function in fn.FUNCTIONS:
-        assert function.layout and function.returns and function.evidence in fn.Evidence
+        assert function.layout and function.returns and function.evidence in fe.Evidence
         assert function.cls in (1, 2)
 
 
@@ -160,13 +161,13 @@ def test_pmc_length_must_match_the_range() -> None:
 def test_cnc_error_becomes_typed_exception() -> None:
     req = fn.STATINFO.request()
     with pytest.raises(FunctionNotAvailable) as caught:
-        fn.STATINFO.decode_response(fn.error_response(req, 1, 7), req, CTX16)
+        fn.STATINFO.decode_response(fe.error_response(req, 1, 7), req, CTX16)
     assert (caught.value.code, caught.value.name, caught.value.function, caught.value.detail) == \
         (1, "EW_FUNC", "statinfo", 7)
     assert isinstance(caught.value, NotSupported)
     with pytest.raises(AccessDenied):
-        fn.WRITE_PMC.decode_response(fn.error_response(req, 17), req, CTX16)
-    assert fn.error_response(req, 1).encode().hex() == "00100001000100190001000000000000"
+        fn.WRITE_PMC.decode_response(fe.error_response(req, 17), req, CTX16)
+    assert fe.error_response(req, 1).encode().hex() == "00100001000100190001000000000000"
 
 
 def test_write_requests_carry_their_values_to_the_server() -> None:
@@ -230,7 +231,7 @@ def test_clock_is_two_subpackets_combined() -> None:
     when = datetime(2025, 1, 2, 3, 4, 5)
     answers = [fn.READ_CLOCK.response(req, when, CTX16) for req in plan.requests]
     assert item_result(plan, answers, CTX16) == when
-    answers[1] = fn.error_response(plan.requests[1], 6)
+    answers[1] = fe.error_response(plan.requests[1], 6)
     assert isinstance(item_result(plan, answers, CTX16), FunctionNotAvailable)
 
 
@@ -276,5 +277,5 @@ def test_little_endian_timer_with_zero_msec_is_recognised() -> None:
     req = fn.READ_TIMER.request(0)
     for minutes in (1, 100, 123_457, 5_000_001):
         payload = struct.pack("<ii", minutes, 0)
-        assert fn._timer_decode(payload, req, fn.Context(8)) == TimerValue(minutes, 0)
-    assert fn._timer_decode(struct.pack(">ii", 100, 0), req, fn.Context(8)) == TimerValue(100, 0)
+        assert fn._timer_decode(payload, req, fe.Context(8)) == TimerValue(minutes, 0)
+    assert fn._timer_decode(struct.pack(">ii", 100, 0), req, fe.Context(8)) == TimerValue(100, 0)

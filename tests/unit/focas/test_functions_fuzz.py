@@ -14,27 +14,28 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from edge.focas import frame as fr
+from edge.focas import function_entry as fe
 from edge.focas import functions as fn
 from edge.focas.errors import CncError, ProtocolError
 
-contexts = st.builds(fn.Context, max_axis=st.integers(1, 32), slot_form=st.sampled_from(list(fn.SlotForm)))
+contexts = st.builds(fe.Context, max_axis=st.integers(1, 32), slot_form=st.sampled_from(list(fn.SlotForm)))
 int16 = st.integers(-(2**15), 2**15 - 1)
 args = st.tuples(int16, int16, int16, int16)
 
 
 @given(st.sampled_from(fn.FUNCTIONS), args, st.binary(max_size=300), contexts)
-def test_fuzz_every_payload_decoder_raises_only_protocol_errors(function: fn.Function,
+def test_fuzz_every_payload_decoder_raises_only_protocol_errors(function: fe.Function,
                                                                 arguments: tuple[int, int, int, int],
-                                                                payload: bytes, ctx: fn.Context) -> None:
+                                                                payload: bytes, ctx: fe.Context) -> None:
     req = function.request(*arguments)
     with contextlib.suppress(ProtocolError, CncError):
         function.decode_payload(payload, req, ctx)
 
 
 @given(st.sampled_from([f for f in fn.FUNCTIONS if f.is_write]), args, st.binary(max_size=300), contexts)
-def test_fuzz_write_extras_decode_or_raise_protocol_errors(function: fn.Function,
+def test_fuzz_write_extras_decode_or_raise_protocol_errors(function: fe.Function,
                                                            arguments: tuple[int, int, int, int],
-                                                           extra: bytes, ctx: fn.Context) -> None:
+                                                           extra: bytes, ctx: fe.Context) -> None:
     assert function.decode_extra is not None
     req = function.request(*arguments, extra=extra)
     with contextlib.suppress(ProtocolError, CncError):

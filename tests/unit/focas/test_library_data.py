@@ -16,7 +16,7 @@ from edge.focas import items as it
 from edge.focas import native
 from edge.focas import packed as pk
 from edge.focas.errors import CncError, NotSupported, OutOfRange, ProtocolError
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.model import ModalGCode
 from edge.focas.packed import client as packed_client
 from edge.focas.values import SlotForm

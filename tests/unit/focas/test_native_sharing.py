@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from edge.focas import items as it
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.native import plan_item, shared_plan_item
 from edge.focas.values import SlotForm
 

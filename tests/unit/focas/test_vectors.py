@@ -31,7 +31,7 @@ from edge.focas.frame import (
     encode_open_request,
     encode_request,
 )
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.values import SlotForm, decode_scaled
 
 VECTORS_PATH = Path(__file__).parents[2] / "data/focas-vectors.json"

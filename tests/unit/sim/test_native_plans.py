@@ -28,7 +28,7 @@ from edge.focas.frame import (
     encode_request_body,
     encode_response,
 )
-from edge.focas.functions import Context
+from edge.focas.function_entry import Context
 from edge.focas.model import PmcType
 from edge.focas.values import SlotForm, encode_scaled
 from edge.sim import native_plans as ns  # the fast path's caches live in native_plans
