@@ -1,7 +1,8 @@
 """A poll tick's Python cost without I/O: recorded CNC answers replayed to real pollers, DDATA encoded.
 
-    python -m bench.tickreplay record FILE [--period 0.1] [--seconds 60]
-    python -m bench.tickreplay replay FILE [--machines 100] [--rounds 1]
+    python -m bench.tickreplay record FILE [--period 0.1] [--seconds 60] [--same-plan]
+    python -m bench.tickreplay replay FILE [--machines 100] [--rounds 1] [--digest] [--profile OUT] [--per-tick OUT]
+    python -m bench.tickreplay explain PER_TICK_FILE...
 
 `record` polls one simulated CNC (the fleet workload) for a while and keeps every request's answer frame
 and the poll times of every tick. `replay` gives each of N pollers its own client whose round trip hands
@@ -16,12 +17,15 @@ from __future__ import annotations
 import argparse
 import asyncio
 import collections
+import cProfile
 import gc
 import hashlib
+import json
 import pickle
 import tempfile
 import time
 import types
+from operator import is_not
 from pathlib import Path
 from typing import Any
 
@@ -60,12 +64,12 @@ async def begin_session(poller: MachinePoller, node: SparkplugNode) -> pl.Machin
 
 
 
-def _config(period: float, ports: list[int]) -> Any:
+def _config(period: float, ports: list[int], same_plan: bool = False) -> Any:
     return parse_config(f"mqtt: {{host: 127.0.0.1, sparkplug: {{group_id: bench, edge_node_id: gw}}}}\n"
-                        f"machines:\n{machines_section(ports, period)}", "replay", {})
+                        f"machines:\n{machines_section(ports, period, same_plan)}", "replay", {})
 
 
-async def _record(period: float, seconds: float) -> dict[str, Any]:
+async def _record(period: float, seconds: float, same_plan: bool = False) -> dict[str, Any]:
     sim = SimProcess(1, stamp_macro=STAMP_MACRO, clock_macro=CLOCK_MACRO)
     frames: list[tuple[bytes, Frame]] = []
     ticks: list[tuple[frozenset[pl.Group], list[float]]] = []
@@ -101,7 +105,7 @@ async def _record(period: float, seconds: float) -> dict[str, Any]:
     FocasClient._roundtrip = roundtrip  # type: ignore[method-assign]
     MachinePoller._tick = tick  # type: ignore[method-assign]
     try:
-        config = _config(period, sim.ports)
+        config = _config(period, sim.ports, same_plan)
         with tempfile.TemporaryDirectory() as state:
             poller = MachinePoller(machine_settings(config, config.machines[0]), DroppingSink(), Path(state),
                                    jitter_s=0.0, grid=TickGrid(config.poll_grid_step_s))
@@ -115,7 +119,7 @@ async def _record(period: float, seconds: float) -> dict[str, Any]:
         FocasClient._roundtrip = original_roundtrip  # type: ignore[method-assign]
         MachinePoller._tick = original_tick  # type: ignore[method-assign]
         sim.stop()
-    return {"period": period, "frames": frames, "ticks": ticks, "sysinfo": sysinfo}
+    return {"period": period, "frames": frames, "ticks": ticks, "sysinfo": sysinfo, "same_plan": same_plan}
 
 
 class _Replayed:
@@ -138,11 +142,11 @@ class _Replayed:
 
 
 async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode: str,
-                  digest: bool = False) -> None:
+                  digest: bool = False, profile_to: Path | None = None, per_tick: bool = False) -> dict[str, Any]:
     answers: dict[bytes, list[Frame]] = collections.defaultdict(list)
     for data, frame in recording["frames"]:
         answers[data].append(frame)
-    config = _config(recording["period"], [8193] * machines)
+    config = _config(recording["period"], [8193] * machines, recording.get("same_plan", False))
     node = SparkplugNode("bench", "gw", AliasMap())
     node.session_started(0)
     node.born = True
@@ -193,17 +197,31 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
             tune_collector()
             gc.set_threshold(int(gc_mode[6:]), *gc.get_threshold()[1:])
         poller_module.time = clock  # type: ignore[assignment]
+        profiler = cProfile.Profile() if profile_to is not None else None
+        rows: list[list[float]] = []
+        times: list[float] = []
         try:
             for run in range(rounds + 1):  # round 0 warms up (first answers, births)
                 count = samples = 0
+                if run == 1 and profiler is not None:
+                    profiler.enable()
                 cpu = time.process_time()
                 for groups, stamps in ticks:
                     for poller, plan in pollers:
                         clock.values.extend(stamps)
+                        if per_tick and run:
+                            reading, before = poller._clock._reading, list(poller._last_raw)
+                            began = time.perf_counter_ns()
                         tick = await poller._tick(plan, groups)
                         if tick.samples:
                             publish(poller.machine_id, tick.samples)
                             samples += len(tick.samples)
+                        if per_tick and run:
+                            took = time.perf_counter_ns() - began
+                            moved = sum(map(is_not, poller._last_raw, before))
+                            times.append(took / 1000)
+                            rows.append(tick_features(groups, len(tick.samples), moved,
+                                                      poller._clock._reading is not reading))
                         count += 1
                     if len(sent) >= 1000:  # a barrier a second, at 1,000 machine-cycles a second
                         sent.clear()
@@ -217,31 +235,104 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
                           f"{cpu / count * 1e6:.1f} us/tick")
         finally:
             poller_module.time = time  # type: ignore[assignment]
+            if profiler is not None and profile_to is not None:
+                profiler.disable()
+                profiler.dump_stats(profile_to)
+        if per_tick:
+            print_cost_model(rows, times)
         if digest:
             print(f"digest of the published samples: {published.hexdigest()}")
+    return {"period": recording["period"], "machines": machines, "features": FEATURES, "rows": rows, "us": times}
+
+
+FEATURES = ("fixed", "published value", "moved read", "servo loads read", "counters read", "new clock second")
+
+
+def tick_features(groups: Any, samples: int, moved: int, news: bool) -> list[float]:
+    """What one replayed tick did, as FEATURES (the columns of the cost model)."""
+    return [1.0, float(samples), float(moved), float(pl.Group.LOADS in groups), float(pl.Group.COUNTERS in groups),
+            float(news)]
+
+
+def fit_cost_model(rows: list[list[float]], times: list[float]) -> dict[str, float]:
+    """Least squares of each tick's time over its FEATURES (a feature that never varies gets no column)."""
+    used = [j for j in range(len(FEATURES)) if j == 0 or len({row[j] for row in rows}) > 1]
+    a = [[sum(r[i] * r[j] for r in rows) for j in used] for i in used]
+    b = [sum(r[i] * t for r, t in zip(rows, times, strict=True)) for i in used]
+    m = len(used)
+    for col in range(m):  # Gauss-Jordan on the normal equations (a handful of columns)
+        pivot = max(range(col, m), key=lambda r: abs(a[r][col]))
+        a[col], a[pivot], b[col], b[pivot] = a[pivot], a[col], b[pivot], b[col]
+        for r in range(m):
+            if r != col:
+                f = a[r][col] / a[col][col]
+                a[r] = [x - f * y for x, y in zip(a[r], a[col], strict=True)]
+                b[r] -= f * b[col]
+    return {FEATURES[j]: b[i] / a[i][i] for i, j in enumerate(used)}
+
+
+def print_cost_model(rows: list[list[float]], times: list[float]) -> None:
+    """The fit of fit_cost_model, each feature's share of the mean tick."""
+    coefficients = fit_cost_model(rows, times)
+    print(f"per-tick model over {len(rows)} ticks (mean {sum(times) / len(times):.1f} us a tick):")
+    for name, c in coefficients.items():
+        j = FEATURES.index(name)
+        mean = sum(r[j] for r in rows) / len(rows)
+        print(f"  {name:18} {c:7.2f} us x {mean:6.3f} a tick = {c * mean:6.1f} us")
+
+
+def explain(files: list[Path]) -> None:
+    """One fit over the per-tick files of several replays (same code, e.g. the 10 Hz and the 1 Hz recording at
+    the same fleet size), then each file's mean tick split by feature: what makes one tick dearer than another."""
+    loaded = [json.loads(f.read_text()) for f in files]
+    rows = [row for d in loaded for row in d["rows"]]
+    times = [t for d in loaded for t in d["us"]]
+    coefficients = fit_cost_model(rows, times)
+    print(f"one fit over {len(rows)} ticks of {len(files)} replays: "
+          + ", ".join(f"{name} {c:.2f} us" for name, c in coefficients.items()))
+    for f, d in zip(files, loaded, strict=True):
+        n = len(d["rows"])
+        means = {name: sum(r[FEATURES.index(name)] for r in d["rows"]) / n for name in coefficients}
+        parts = ", ".join(f"{name} {means[name]:.3f} x {c:.2f} = {means[name] * c:.1f}"
+                          for name, c in coefficients.items())
+        print(f"{f.name} ({d['machines']} machines, period {d['period']:g} s): measured {sum(d['us']) / n:.1f} us "
+              f"a tick, modelled {sum(means[k] * c for k, c in coefficients.items()):.1f}: {parts}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("mode", choices=("record", "replay"))
-    parser.add_argument("file", type=Path)
+    parser.add_argument("mode", choices=("record", "replay", "explain"))
+    parser.add_argument("file", type=Path, nargs="+", help="explain: the --per-tick files of several replays")
     parser.add_argument("--period", type=float, default=0.1)
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--machines", type=int, default=100)
+    parser.add_argument("--same-plan", action="store_true",
+                        help="record with loads and counters every 10th and 100th tick at any period (as at 10 Hz)")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--gc", default="daemon",
                         help="collector settings: daemon (the daemon's), refreeze (and freeze after warming up), "
                              "young=N, default (CPython's), off")
     parser.add_argument("--digest", action="store_true",
                         help="print a digest of every published sample (the same in two trees: same output)")
+    parser.add_argument("--profile", type=Path, metavar="OUT",
+                        help="cProfile the replayed rounds (not the warm-up round) into OUT (pstats)")
+    parser.add_argument("--per-tick", type=Path, metavar="OUT",
+                        help="time every replayed tick, fit its time to what it did (bench.tickreplay.FEATURES) "
+                             "and write the ticks to OUT (JSON) for a fit over several recordings")
     args = parser.parse_args()
+    if args.mode == "explain":
+        explain(args.file)
+        return
+    args.file = args.file[0]
     if args.mode == "record":
-        recording = asyncio.run(_record(args.period, args.seconds))
+        recording = asyncio.run(_record(args.period, args.seconds, args.same_plan))
         args.file.write_bytes(pickle.dumps(recording))
         print(f"recorded {len(recording['ticks'])} ticks, {len(recording['frames'])} frames")
     else:
-        asyncio.run(_replay(pickle.loads(args.file.read_bytes()), args.machines, args.rounds, args.gc,
-                           args.digest))
+        ticks = asyncio.run(_replay(pickle.loads(args.file.read_bytes()), args.machines, args.rounds, args.gc,
+                                    args.digest, args.profile, args.per_tick is not None))
+        if args.per_tick is not None:
+            args.per_tick.write_text(json.dumps(ticks))
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from edge.samples import SAMPLE_SLOT_SETTERS, MetricType, Quality, Sample
 
 _new = object.__new__
+_PLAIN = frozenset({int, str, bool})  # types whose values differ exactly when they are unequal
 _SET_NAME, _SET_VALUE, _SET_TYPE, _SET_TIMESTAMP, _SET_QUALITY, _SET_HISTORICAL = SAMPLE_SLOT_SETTERS
 
 
@@ -110,9 +111,13 @@ class ChangeDetector:
             if same_type and old == value:
                 return None
             band = self._deadbands.get(name, 0.0)
-            if same_type and type(value) is float and not band:  # a moving position, feed or speed
-                if value != value and old != old:  # NaN stays NaN: no change
+            if same_type and not band:
+                if type(value) is float:  # a moving position, feed or speed
+                    if value != value and old != old:  # NaN stays NaN: no change
+                        return None
+                elif type(value) not in _PLAIN and not values_differ(old, value, band):
                     return None
+                # an int, str or bool unequal to the last one of its type: values_differ would say so too
             elif not values_differ(old, value, band):
                 return None
         # edge.samples.new_sample, inline: the tick reports ~10 values, nearly all of them changes.

@@ -39,10 +39,12 @@ class ClockFeed:
         self._reading: object = _NOTHING  # the CNC clock value of the last answer (unchanged within a second)
         self._epoch = 0.0  # that value as epoch seconds
         self._mode_logged: bool | None = None  # the clock mode last announced in the log
+        self._offered: tuple[object, ...] | None = None  # the Clock/* values last offered to change detection
 
     def new_session(self) -> None:
-        """A fresh session answers a fresh object even for the same second."""
+        """A fresh session answers a fresh object even for the same second, and has a fresh change detector."""
         self._reading = _NOTHING
+        self._offered = None
 
     def is_new_reading(self, result: object) -> bool:
         """True for a clock value other than the last one (the poller then clears a failing ReadClock)."""
@@ -87,21 +89,29 @@ class ClockFeed:
                     step, self.tracker.skew_s or 0.0, follow)
 
     def samples(self, timestamp: int, mid_mono: float, report: Report, samples: list[Sample]) -> None:
-        """Append the Clock/* metrics that changed (skew, gateway-time flag, offset uncertainty, synchronised)."""
+        """Append the Clock/* metrics that changed (skew, gateway-time flag, offset uncertainty, synchronised).
+
+        Values equal to the ones offered last time are not offered again: `report` would find each unchanged
+        (only this feed reports these names to its session's detector, and `new_session` forgets what was
+        offered). Most new CNC seconds move none of them; at 1 Hz that is every tick."""
         tracker = self.tracker
         skew = tracker.skew_s
         uncertainty = tracker.uncertainty_at(mid_mono)
-        for sample in (
-            report(pl.CLOCK_SKEW.name, round(skew, 3) if skew is not None else None, pl.CLOCK_SKEW.type,
-                   timestamp, Quality.GOOD if skew is not None else Quality.BAD),
-            report(pl.CLOCK_GATEWAY.name, tracker.use_gateway_time, pl.CLOCK_GATEWAY.type, timestamp),
-            # Whole milliseconds, rounded up: still a bound, and it moves every ~10 s as readings age, not every tick
-            report(pl.CLOCK_UNCERTAINTY.name, float(math.ceil(uncertainty * 1000)) if uncertainty is not None else None,
-                   pl.CLOCK_UNCERTAINTY.type, timestamp, Quality.GOOD if uncertainty is not None else Quality.BAD),
-            report(pl.CLOCK_SYNCHRONISED.name, tracker.synchronised_at(mid_mono), pl.CLOCK_SYNCHRONISED.type,
-                   timestamp),
-        ):
-            if sample is not None:
-                samples.append(sample)
+        skew_ms = round(skew, 3) if skew is not None else None
+        # Whole milliseconds, rounded up: still a bound, and it moves every ~10 s as readings age, not every tick
+        uncertainty_ms = float(math.ceil(uncertainty * 1000)) if uncertainty is not None else None
+        offered = (skew_ms, tracker.use_gateway_time, uncertainty_ms, tracker.synchronised_at(mid_mono))
+        if offered != self._offered:
+            self._offered = offered
+            for sample in (
+                report(pl.CLOCK_SKEW.name, skew_ms, pl.CLOCK_SKEW.type, timestamp,
+                       Quality.GOOD if skew is not None else Quality.BAD),
+                report(pl.CLOCK_GATEWAY.name, offered[1], pl.CLOCK_GATEWAY.type, timestamp),
+                report(pl.CLOCK_UNCERTAINTY.name, uncertainty_ms, pl.CLOCK_UNCERTAINTY.type, timestamp,
+                       Quality.GOOD if uncertainty is not None else Quality.BAD),
+                report(pl.CLOCK_SYNCHRONISED.name, offered[3], pl.CLOCK_SYNCHRONISED.type, timestamp),
+            ):
+                if sample is not None:
+                    samples.append(sample)
         self.news = tracker.slew_lag_at(mid_mono) > 0.0  # while stamps slew, Synchronised may turn true
 

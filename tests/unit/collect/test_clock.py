@@ -125,6 +125,19 @@ def test_offset_of_a_naive_vs_aware_time() -> None:
     assert cnc_to_utc_seconds(aware, ZoneInfo("Asia/Tokyo")) == aware.timestamp()
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(["Europe/Berlin", "America/Chicago", "Australia/Lord_Howe", "Asia/Kolkata", "UTC"]),
+       st.datetimes(min_value=datetime(1990, 1, 1), max_value=datetime(2060, 1, 1)), st.sampled_from([0, 1]),
+       st.sampled_from([0, 1]))
+def test_a_naive_cnc_time_converts_as_the_zone_aware_time_would(zone: str, wall: datetime, fold: int,
+                                                                   near_a_change: int) -> None:
+    tz = ZoneInfo(zone)
+    if near_a_change:  # the hours around a DST change: gaps (times that never happened) and folds (twice)
+        wall = wall.replace(month=3 if wall.month < 7 else 10, day=25 + wall.day % 7, hour=wall.hour % 4)
+    wall = wall.replace(fold=fold)
+    assert cnc_to_utc_seconds(wall, tz) == wall.replace(tzinfo=tz).timestamp()
+
+
 def test_one_reading_is_at_most_half_a_second_off() -> None:
     tracker = ClockTracker("UTC", max_skew_s=60)
     cnc = FakeCnc(37.9)  # T0 is a whole second, so the CNC is 0.9 s into its second at mono 0
