@@ -80,7 +80,9 @@ async function main() {
       const modulo = args.modulo * 1000;
       changeMs.push((((received - dataValue.value.value * 1000) % modulo) + modulo) % modulo);
       if (dataValue.sourceTimestamp) {
-        waitMs.push((((dataValue.sourceTimestamp.getTime() - dataValue.value.value * 1000) % modulo) + modulo) % modulo);
+        // signed: a read stamped a few ms before the change (the stamp's own error) is a small negative wait
+        const wait = (((dataValue.sourceTimestamp.getTime() - dataValue.value.value * 1000) % modulo) + modulo) % modulo;
+        waitMs.push(wait > modulo / 2 ? wait - modulo : wait);
       }
     }
   });
