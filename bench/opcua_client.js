@@ -4,11 +4,12 @@
 //   node bench/opcua_client.js '{"url","user","password","namespaceUri","stampMetric","pki","modulo"}'
 //   -> {"items": N, "stamp_items": M}   once subscribed
 //   start   forget what arrived so far, record from now on          -> {"started": true}
-//   report  -> {"notifications", "seconds", "change_ms": [...], "sample_ms": [...]}
+//   report  -> {"notifications", "seconds", "change_ms": [...], "wait_ms": [...], "sample_ms": [...]}
 //   burst   one CreateMonitoredItems request of 10,000 items (a second subscription) -> {"burst_s"} or {"error"}
 //   stop    disconnect and exit
 // change = the simulator's stamp macro value (its clock, seconds mod `modulo`) to receipt; sample =
-// SourceTimestamp (the CNC time of the read) to receipt, over every notification.
+// SourceTimestamp (the CNC time of the read) to receipt, over every notification; wait = the stamp's change to
+// the read that saw it (SourceTimestamp - the stamp's value: the part of change that is the poll period's).
 "use strict";
 const path = require("path");
 const readline = require("readline");
@@ -60,7 +61,7 @@ async function main() {
     password: args.password });
   const ns = (await session.readNamespaceArray()).indexOf(args.namespaceUri);
   const nodes = await variables(session, ns);
-  let recording = false, started = Date.now(), notifications = 0, changeMs = [], sampleMs = [];
+  let recording = false, started = Date.now(), notifications = 0, changeMs = [], waitMs = [], sampleMs = [];
   const subscription = await session.createSubscription2({
     requestedPublishingInterval: 20, requestedLifetimeCount: 3000, requestedMaxKeepAliveCount: 100,
     maxNotificationsPerPublish: 0, publishingEnabled: true, priority: 1,
@@ -78,6 +79,11 @@ async function main() {
     if (stamp.has(index) && typeof dataValue.value.value === "number") {
       const modulo = args.modulo * 1000;
       changeMs.push((((received - dataValue.value.value * 1000) % modulo) + modulo) % modulo);
+      if (dataValue.sourceTimestamp) {
+        // signed: a read stamped a few ms before the change (the stamp's own error) is a small negative wait
+        const wait = (((dataValue.sourceTimestamp.getTime() - dataValue.value.value * 1000) % modulo) + modulo) % modulo;
+        waitMs.push(wait > modulo / 2 ? wait - modulo : wait);
+      }
     }
   });
   say({ items: nodes.length, stamp_items: stamp.size });
@@ -85,10 +91,11 @@ async function main() {
   for await (const line of lines) {
     const command = line.trim();
     if (command === "start") {
-      recording = true; started = Date.now(); notifications = 0; changeMs = []; sampleMs = [];
+      recording = true; started = Date.now(); notifications = 0; changeMs = []; waitMs = []; sampleMs = [];
       say({ started: true });
     } else if (command === "report") {
-      say({ notifications, seconds: (Date.now() - started) / 1000, change_ms: changeMs, sample_ms: sampleMs });
+      say({ notifications, seconds: (Date.now() - started) / 1000, change_ms: changeMs, wait_ms: waitMs,
+        sample_ms: sampleMs });
     } else if (command === "burst") {
       try {
         const second = await session.createSubscription2({ requestedPublishingInterval: 1000,

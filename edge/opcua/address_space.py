@@ -27,12 +27,13 @@ from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import GatewayMonitoredItems, notify_all
+from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, notify_all, taps_of
 from edge.opcua.values import (
     ServerTime,
     SharedDataValue,
     data_value,
     offline_value,
+    same_reading,
     server_now,
     server_time,
     status_code,
@@ -46,6 +47,8 @@ _WAITING = "BadWaitingForInitialData"
 
 Pending = tuple[int, Any, SharedDataValue]  # (handle, asyncua data-change callback, value) to await
 _NO_PENDING: list[Pending] = []  # shared, never appended to: `_pending` copies it first
+_NO_TAPS: list[Tap] = []
+_NO_OTHERS: list[tuple[int, Any]] = []
 
 
 def _pending(slow: list[Pending], others: Any, value: SharedDataValue) -> list[Pending]:
@@ -73,6 +76,12 @@ class MetricSlot:
     shown: SharedDataValue | None = None
     sample: Sample | None = None
     server_ns: int = 0
+    # who a change reaches, made from the attributes' data-change callbacks at subscriptions.CHANGES[0] ==
+    # `changes` (`retap`): the taps of the usual client items, the other callbacks, whether there is any
+    changes: int = -1
+    taps: list[Tap] = field(default_factory=lambda: _NO_TAPS)
+    others: list[tuple[int, Any]] = field(default_factory=lambda: _NO_OTHERS)
+    watched: bool = False
 
     def read(self, _node_id: object = None, _attribute_id: object = None) -> SharedDataValue:
         """The DataValue the nodes show (asyncua's value_callback: Read, a new monitored item's first value)."""
@@ -81,6 +90,19 @@ class MetricSlot:
             assert self.sample is not None  # shown is only cleared with a sample stored
             shown = self.shown = data_value(self.sample, server_time(self.server_ns))
         return shown
+
+    def retap(self, changes: int) -> None:
+        taps: list[Tap] = []
+        others: list[tuple[int, Any]] = []
+        for attribute in self.attributes:
+            if attribute.datachange_callbacks:
+                more_taps, more_others = taps_of(attribute.datachange_callbacks)
+                taps += more_taps
+                others += more_others
+        self.taps = taps or _NO_TAPS
+        self.others = others or _NO_OTHERS
+        self.watched = bool(taps or others)
+        self.changes = changes
 
 
 @dataclass
@@ -220,13 +242,20 @@ class GatewaySpace:
     # ---- values ------------------------------------------------------------------------------------
     def show(self, device_id: str, samples: Iterable[Sample]) -> list[Pending]:
         """Show the samples' values and tell the gateway's monitored items, synchronously; returns the
-        monitored items that need asyncua's coroutine (a filter), to be awaited in order (`deliver`)."""
+        monitored items that need asyncua's coroutine (a filter), to be awaited in order (`deliver`).
+
+        A client's usual item is told through its tap (subscriptions.taps_of): the change is queued as the
+        notification's bytes, with `notify`'s checks made when the taps were. The StatusValue trigger (no
+        notification when neither value nor status changed) is checked once per value, against the value the
+        metric showed: every tapped item has been told each value since it was created or enabled (when its
+        own first value was this slot's), so that is the value each of them last saw."""
         machine = self.machines.get(device_id)
         if machine is None:
             return _NO_PENDING
         slots = machine.slots
         now_ns = time.time_ns()
         now: ServerTime | None = None  # built for the first monitored value
+        changes = CHANGES[0]
         count = 0
         slow = _NO_PENDING
         for sample in samples:
@@ -235,20 +264,38 @@ class GatewaySpace:
                 continue
             slot.sample = sample
             slot.server_ns = now_ns
-            value = None
-            for attribute in slot.attributes:
-                callbacks = attribute.datachange_callbacks
-                if callbacks:  # monitored: the gateway's items take it synchronously (notify_all, inlined)
-                    if value is None:
-                        if now is None:
-                            now = server_time(now_ns)
-                        value = data_value(sample, now)
-                    for handle, callback in callbacks.items():
-                        owner = getattr(callback, "__self__", None)
-                        if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
-                            slow = _pending(slow, ((handle, callback),), value)
-            slot.shown = value  # None: built from the sample when read
             count += 1
+            if slot.changes != changes:
+                slot.retap(changes)
+            if not slot.watched:
+                slot.shown = None  # built from the sample when read
+                continue
+            if now is None:
+                now = server_time(now_ns)
+            value = data_value(sample, now)
+            previous = slot.shown
+            slot.shown = value
+            taps = slot.taps
+            if taps:
+                if previous is None or not same_reading(previous, value):
+                    encoded = value.encoded
+                    for values, mid, prefix, bound, subscription in taps:  # GatewayMonitoredItems.notify, inlined
+                        values.current_dvalue = value
+                        queue = subscription._triggered_datachanges
+                        pending = queue.get(mid)
+                        if pending is None:
+                            queue[mid] = [prefix + encoded]
+                        else:
+                            if len(pending) >= bound:
+                                del pending[0]  # asyncua's choice whatever DiscardOldest says: the oldest goes
+                            pending.append(prefix + encoded)
+                else:
+                    for tap in taps:
+                        tap[0].current_dvalue = value
+            for handle, callback in slot.others:
+                owner = getattr(callback, "__self__", None)
+                if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+                    slow = _pending(slow, ((handle, callback),), value)
         self.values_set += count
         return slow
 

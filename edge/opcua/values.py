@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 from asyncua import ua
 
-from edge.opcua.encoding import ENCODERS, ticks
+from edge.opcua.encoding import ENCODERS, MAX_MS, MIN_MS, TICKS_PER_MS, WIN_EPOCH_OFFSET_MS, ticks
 from edge.opcua.layout import OFFLINE_STATUS, VARIANT_TYPES, status_name
 from edge.samples import MetricType, Quality, Sample, utc_datetime
 
@@ -152,30 +152,44 @@ def _shared(variant: ua.Variant, status: ua.StatusCode, source: datetime, server
 _NULL_ENCODER = ENCODERS[ua.VariantType.Null]
 
 
-def _status_of(quality: object) -> tuple[ua.StatusCode, bool]:
+def _status_of(quality: object) -> tuple[ua.StatusCode, bool, int]:
     status = status_code(status_name(quality))
-    return status, status.is_bad()
+    return status, status.is_bad(), status.value
 
 
-_QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quality -> (status, is bad)
+_QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quality -> (status, is bad, its code)
 
 
 def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
-    """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status)."""
-    status, bad = _QUALITY_STATUS.get(sample.quality) or _status_of(sample.quality)
+    """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status).
+
+    Called for every monitored value change: `ticks`, the conversion of a value already of the node's Python
+    type and `_lazy` are inlined."""
+    status, bad, code = _QUALITY_STATUS.get(sample.quality) or _status_of(sample.quality)
     stamp = sample.timestamp_ms
-    if not bad and sample.value is not None:
-        convert, vtype, encode = _KINDS[sample.type]
-        value = convert(sample.value)
+    source = (stamp + WIN_EPOCH_OFFSET_MS) * TICKS_PER_MS if MIN_MS < stamp < MAX_MS else ticks(stamp)
+    value = sample.value
+    if not bad and value is not None:
+        native, convert, vtype, encode = _KINDS[sample.type]
+        if type(value) is not native:
+            value = convert(value)
         if value is not None:
             try:
-                encoded = encode(value, status.value, ticks(stamp), server.ticks)
+                encoded = encode(value, code, source, server.ticks)
             except (struct.error, OverflowError):  # outside the node's type (an Int16 of 40000)
                 encoded = None
             if encoded is not None:
-                return _lazy(value, vtype, status, stamp, server, encoded)
+                made = _new(LazyDataValue)
+                made.raw = value
+                made.vtype = vtype
+                made.StatusCode = status
+                made.stamp = stamp
+                made.server = server
+                made.encoded = encoded
+                return made
         status = status_code("BadTypeMismatch")
-    encoded = _NULL_ENCODER(None, status.value, ticks(stamp), server.ticks)
+        code = status.value
+    encoded = _NULL_ENCODER(None, code, source, server.ticks)
     return _lazy(None, _NULL_TYPE, status, stamp, server, encoded)
 
 
@@ -210,8 +224,14 @@ def _to_datetime(value: object) -> object:
 _CONVERT: dict[MetricType, Callable[[object], object]] = {
     **dict.fromkeys(_FLOATS, _to_float), **dict.fromkeys(_INTEGERS, _to_int), MetricType.BOOLEAN: _to_bool,
     MetricType.STRING: _to_str, MetricType.DATETIME: _to_datetime}
-# metric type -> (converter, variant type, encoder): one lookup per value
-_KINDS = {kind: (convert, _VARIANT[kind], ENCODERS[_VARIANT[kind]]) for kind, convert in _CONVERT.items()}
+# the Python type a metric type's values usually have, taken as it is (a subclass, bool for int, goes through
+# the converter); None: always converted
+_NATIVE: dict[MetricType, type | None] = {
+    **dict.fromkeys(_FLOATS, float), **dict.fromkeys(_INTEGERS, int), MetricType.BOOLEAN: bool,
+    MetricType.STRING: str, MetricType.DATETIME: None}
+# metric type -> (native type, converter, variant type, encoder): one lookup per value
+_KINDS = {kind: (_NATIVE[kind], convert, _VARIANT[kind], ENCODERS[_VARIANT[kind]])
+          for kind, convert in _CONVERT.items()}
 
 
 def client_value(variant: ua.Variant, kind: MetricType) -> tuple[bool, object]:

@@ -198,3 +198,57 @@ async def test_a_value_nobody_monitors_is_read_as_its_last_sample_shows_it(subsc
     await subscribed.space.offline(machine)
     offline = space.iserver.aspace.read_attribute_value(node, ua.AttributeIds.Value)
     assert (offline.Value.Value, offline.StatusCode.value) == (None, ua.StatusCodes.BadNoCommunication)
+
+
+async def test_an_item_given_a_deadband_later_leaves_the_short_path(subscribed: Subscribed) -> None:
+    mid = await subscribed.monitor("Macro/2", 31, queue_size=10)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/2", 1.0, 2.0))
+    assert await subscribed.publish() == [(31, 1.0, 0), (31, 2.0, 0)]
+    deadband = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValue,
+                                   DeadbandType=ua.DeadbandType.Absolute, DeadbandValue=5.0)
+    modify = ua.MonitoredItemModifyRequest(MonitoredItemId=mid, RequestedParameters=ua.MonitoringParameters(
+        ClientHandle=31, QueueSize=10, Filter=deadband))
+    subscribed.subscription.monitored_item_srv.modify_monitored_items(
+        ua.ModifyMonitoredItemsParameters(ItemsToModify=[modify]))
+    await _feed(subscribed, _values("Macro/2", 3.0, 10.0, 12.0))  # deltas 1, 7, 2 from the value before
+    assert await subscribed.publish() == [(31, 10.0, 0)]
+
+
+async def test_a_modified_queue_size_bounds_the_next_changes(subscribed: Subscribed) -> None:
+    mid = await subscribed.monitor("Macro/3", 41, queue_size=1)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/3", 1.0, 2.0))
+    assert await subscribed.publish() == [(41, 2.0, 0)]
+    modify = ua.MonitoredItemModifyRequest(MonitoredItemId=mid, RequestedParameters=ua.MonitoringParameters(
+        ClientHandle=41, QueueSize=3))
+    subscribed.subscription.monitored_item_srv.modify_monitored_items(
+        ua.ModifyMonitoredItemsParameters(ItemsToModify=[modify]))
+    await _feed(subscribed, _values("Macro/3", 3.0, 4.0, 5.0, 6.0))
+    assert await subscribed.publish() == [(41, 4.0, 0), (41, 5.0, 0), (41, 6.0, 0)]
+
+
+async def test_two_items_on_one_node_and_one_created_later_each_get_every_change(subscribed: Subscribed) -> None:
+    await subscribed.monitor("Macro/0", 51, queue_size=5)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/0", 1.0))
+    await subscribed.monitor("Macro/0", 52, queue_size=5)  # its first value: the current one
+    await _feed(subscribed, _values("Macro/0", 2.0) + _values("Macro/0", 2.0, ms=CNC_MS + 50))
+    assert await subscribed.publish() == [(51, 1.0, 0), (51, 2.0, 0), (52, 1.0, 0), (52, 2.0, 0)]
+
+
+async def test_a_client_asking_a_faster_publishing_interval_gets_the_servers_minimum(
+        server: tuple[Server, GatewaySpace]) -> None:
+    service = server[0].iserver.subscription_service
+    fastest = subscriptions.MIN_PUBLISHING_INTERVAL_MS
+    for asked, revised in ((0.0, fastest), (5.0, fastest), (250.0, 250.0)):
+        params = ua.CreateSubscriptionParameters(RequestedPublishingInterval=asked, RequestedLifetimeCount=100,
+                                                 RequestedMaxKeepAliveCount=10, PublishingEnabled=True)
+
+        async def forward(_result: ua.PublishResult, _request: _Request) -> None:
+            return None
+
+        created = await service.create_subscription(params, forward, ua.NodeId(1, 0),
+                                                    request_callback=lambda _id: None)
+        assert created.RevisedPublishingInterval == revised
+        await service.delete_subscriptions([created.SubscriptionId])
