@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 from operator import attrgetter
 from typing import Any, Protocol
 
-from edge.publish.holding import Format, ReplaySpool, Spool
+from edge.publish.holding import Format, IndexedSpool, ReplaySpool, Spool
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import MqttConnection
 from edge.publish.node import Outgoing
@@ -49,6 +49,7 @@ IN_FLIGHT = 3
 # the kernel, or QoS 1 not yet acknowledged): a broker slower than the pace then slows the replay instead of
 # filling the process's memory.
 HELD_BYTES = 1024 * 1024
+READ_ROWS = 256  # Sparkplug reads a step's bodies about this many rows (whole devices) at a time
 MERGE_ROWS = 16  # spool rows of one device in one replayed DDATA at most (~5 kB at 12 values a row)
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work at least, not each chunk
 MAX_SLICE_S = 0.1  # and after this much at most (what a live tick may wait for the replay)
@@ -164,6 +165,9 @@ class Replayer:
         # broker, not in the MQTT client (`_room`), and a step in flight keeps only its row ids.
         window: deque[tuple[asyncio.Future[bool], _Step]] = deque()
         after = 0  # the rows up to here are sent (and in flight or acked)
+        streamed = self._from_rows is not None and isinstance(spool, IndexedSpool)
+        by_device: dict[str, list[int]] = {}
+        entries: Sequence[Any] = []
         try:
             while current():
                 while window and (window[0][0].done() or len(window) >= IN_FLIGHT):
@@ -171,9 +175,15 @@ class Replayer:
                         return
                 if not current():
                     return
-                entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
-                                       after=after)
-                if not entries:
+                if streamed:  # ids only; the bodies are read a few devices at a time (`_send_streamed`)
+                    assert isinstance(spool, IndexedSpool)
+                    by_device = spool.oldest_ids(fmt, fetch, target.replay_devices(), after=after)
+                    last = max((ids[-1] for ids in by_device.values()), default=None)
+                else:
+                    entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
+                                           after=after)
+                    last = entries[-1].id if entries else None
+                if last is None:
                     if window:
                         if not await confirmed(*window.popleft()):
                             return
@@ -183,12 +193,16 @@ class Replayer:
                         after = 0
                         continue
                     break
-                after = entries[-1].id
+                after = last
                 step = _Step(conn, current)
-                if self._from_rows is not None:
+                if streamed:
+                    ok = await self._send_streamed(step, by_device, pacer)
+                    by_device = {}
+                elif self._from_rows is not None:
                     ok = await self._send_by_device(step, entries, pacer)
                 else:
                     ok = await self._send_each(step, entries, pacer)
+                entries = []  # not alive while the next step is read
                 if not ok:
                     return
                 await pacer.pace(force=True)
@@ -222,6 +236,25 @@ class Replayer:
                 return False
             if pacer.counted(1):
                 await self._pace(step, pacer)
+        return True
+
+    async def _send_streamed(self, step: _Step, by_device: dict[str, list[int]], pacer: _Pacer) -> bool:
+        """A step's rows, by device (`_send_by_device`), their bodies read READ_ROWS rows' worth of devices
+        at a time: the step's ids are small, its ~9 MB of bodies are not alive at once."""
+        spool = self._spool
+        assert isinstance(spool, IndexedSpool)
+        fmt = self._link.fmt
+        chunk: list[int] = []
+        for ids in by_device.values():
+            chunk.extend(ids)
+            if len(chunk) >= READ_ROWS:
+                chunk.sort()
+                if not await self._send_by_device(step, spool.read(fmt, chunk), pacer):
+                    return False
+                chunk = []
+        if chunk:
+            chunk.sort()
+            return await self._send_by_device(step, spool.read(fmt, chunk), pacer)
         return True
 
     async def _send_by_device(self, step: _Step, entries: Sequence[Any], pacer: _Pacer) -> bool:
