@@ -327,8 +327,9 @@ class SparkplugSession:
         def current() -> bool:
             return session == link.session and conn.connected and node.generation == generation and node.live
 
-        slice_from = time.monotonic()
-        for device_id in node.unborn_devices():
+        started = slice_from = time.monotonic()
+        pending = node.unborn_devices()
+        for device_id in pending:
             if time.monotonic() - slice_from > BIRTH_SLICE_S:
                 await asyncio.sleep(0)
                 if conn.held > BIRTH_HELD_BYTES and current():
@@ -349,6 +350,7 @@ class SparkplugSession:
         if not current():
             return
         link.send(conn, node.held_event_data())  # events of devices gone offline meanwhile: none go out
+        log.info("births sent devices=%d seconds=%.2f", len(pending), time.monotonic() - started)
         self.replay.kick()
 
     def _record_birth(self, device_id: str) -> None:

@@ -108,3 +108,17 @@ def test_birth_values_are_kept_by_reference_and_follow_the_connection() -> None:
     assert d.fresh("m1", [s(1), s(4)]) == [s(4)] and len(d) == 0, "births are not keys"
     d.forget()
     assert d.fresh("m1", [s(1)]) == [s(1)]
+
+
+def test_a_birth_recorded_by_a_layouts_slots_skips_what_it_carried() -> None:
+    """The session records a DBIRTH as its device table's samples by position and the layout's shared
+    slots (no dict per device): the same answers as a birth recorded as samples."""
+    d = DeliveredValues()
+    slots = {"Macro/500": (0,), "Macro/501": (1,), "Macro/502": (2,)}
+    d.record_birth_slots("m1", slots, (s(1), s(2, name="Macro/501"), None))
+    assert d.fresh("m1", [s(1), s(1, value=2.5), s(3), s(2, name="Macro/502")]) == \
+        [s(1, value=2.5), s(3), s(2, name="Macro/502")]
+    assert d.fresh("m1", [s(2)]) == [s(2)], "the birth carried Macro/501 at 2, not Macro/500"
+    d.proven(d.mark())
+    d.connection_lost()
+    assert d.fresh("m1", [s(1), s(4)]) == [s(4)], "a proven birth stays indexed across connections"
