@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from operator import attrgetter, itemgetter
 from typing import Any
 
+from edge.publish import birth_bytes
 from edge.publish import ddata as dd
 from edge.publish import payload as pl
 from edge.publish.aliases import NODE, AliasMap
@@ -214,31 +215,44 @@ class SparkplugNode:
         return [(d, list(events)) for d, events in self._held_events]
 
     def _add_birth_metrics(self, p: Payload, device_key: str, dev: DeviceTable, ts: int) -> None:
-        alias_of = self._aliases.alias  # assigned when the device was declared: a lookup here
+        """The birth's metrics with the protobuf runtime (the NBIRTH; DBIRTHs: edge.publish.birth_bytes)."""
         for spec, sample in zip(dev.layout.specs.values(), dev.last, strict=True):
-            name = spec.name
-            value = None if sample is None else sample.value
-            quality = Quality.GOOD if sample is None else sample.quality
-            try:
-                m = pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, value,
-                                        ts if sample is None else sample.timestamp_ms, unit=spec.unit,
-                                        quality=quality, description=spec.description)
-            except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
-                self._encode_failed(name, exc)
-                del p.metrics[-1]
-                pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, None, ts,
-                                    unit=spec.unit, quality=Quality.BAD, description=spec.description)
-                continue
-            if sample is not None and sample.historical:
-                m.is_historical = True
+            self._add_birth_metric(p, device_key, spec, sample, ts)
         dev.not_good = {s.name for s in dev.last if s is not None and s.quality is not Quality.GOOD}
+
+    def _add_birth_metric(self, p: Payload, device_key: str, spec: MetricSpec, sample: Sample | None,
+                          ts: int) -> None:
+        alias = self._aliases.alias(device_key, spec.name)  # assigned when the device was declared
+        name = spec.name
+        value = None if sample is None else sample.value
+        quality = Quality.GOOD if sample is None else sample.quality
+        try:
+            m = pl.add_birth_metric(p.metrics, name, alias, spec.type, value,
+                                    ts if sample is None else sample.timestamp_ms, unit=spec.unit,
+                                    quality=quality, description=spec.description)
+        except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
+            self._encode_failed(name, exc)
+            del p.metrics[-1]
+            pl.add_birth_metric(p.metrics, name, alias, spec.type, None, ts,
+                                unit=spec.unit, quality=Quality.BAD, description=spec.description)
+            return
+        if sample is not None and sample.historical:
+            m.is_historical = True
 
     def _dbirth(self, device_id: str, dev: DeviceTable) -> Outgoing:
         ts = self._clock()
-        p = Payload(timestamp=ts, seq=self._next_seq())
-        self._add_birth_metrics(p, device_id, dev, ts)
+        seq = self._next_seq()
+        specs = list(dev.layout.specs.values())
+
+        def runtime(position: int, at: int) -> bytes:  # one metric the byte writer leaves to protobuf
+            scratch = Payload()
+            self._add_birth_metric(scratch, device_id, specs[position], dev.last[position], at)
+            return scratch.SerializeToString()
+
+        payload = birth_bytes.birth_payload(ts, seq, birth_bytes.birth_metrics(dev, ts, runtime))
+        dev.not_good = {s.name for s in dev.last if s is not None and s.quality is not Quality.GOOD}
         dev.born_in = self.generation
-        return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), p.SerializeToString())
+        return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), payload)
 
     def request_rebirth(self) -> bool:
         """Stop DATA at once (until births()); False if there is nothing born to rebirth."""
