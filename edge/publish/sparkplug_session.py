@@ -8,8 +8,10 @@ Rules this module keeps:
    step, so this session is the single writer of seq and wire order equals seq order.
 4. A rebirth request (NCMD Node Control/Rebirth) stops DATA at once; births follow at most once per
    `rebirth_min_interval_s`, later requests in that window coalesce.
-5. DATA goes out live only while born, the device is online and the link is not suspect; otherwise it is
-   held (edge.publish.link) and replayed after the births, without what the births already carried.
+5. DATA goes out live only while born, the device is online and born since the NBIRTH (its DBIRTH sent)
+   and the link is not suspect; otherwise it is held (edge.publish.link) and replayed after the births,
+   without what the births already carried. The NBIRTH goes out at once, the DBIRTHs over the next loop
+   turns (`_dbirths`), so 1,000 machines' births do not hold the live ticks for one long turn.
 6. Our own NBIRTH and NDEATH topics are watched: another session's birth or death there, or the broker
    taking our client id, is an identity conflict (edge.publish.identity): one ERROR, then reconnects and
    rebirths at most once a minute while it lasts.
