@@ -259,8 +259,9 @@ class Replayer:
 
     async def _send_by_device(self, step: _Step, entries: Sequence[Any], pacer: _Pacer) -> bool:
         """Sparkplug: a step's rows of one device, oldest first, in DDATA of up to MERGE_ROWS rows each,
-        straight from their parsed rows. A row whose values the host may have goes through the dedupe on
-        its own, after the rows before it (so each device's rows still go out in spool order)."""
+        straight from their parsed rows, without the values a birth carried. A row whose values a recorded
+        key may match goes through the dedupe on its own, as samples, after the rows before it (so each
+        device's rows still go out in spool order)."""
         delivered = self._delivered
         groups: dict[str, list[Any]] = {}
         for entry in entries:
@@ -272,8 +273,12 @@ class Replayer:
                 merged: list[tuple[Any, list[Any]]] = []
                 for entry in part:
                     rows = entry.rows()
-                    if rows is not None and (delivered is None
-                                             or not delivered.overlaps(device_id, map(TIMESTAMP, rows))):
+                    if rows is not None and delivered is not None \
+                            and delivered.overlaps(device_id, map(TIMESTAMP, rows)):
+                        rows = delivered.fresh_rows(device_id, rows)  # None: keys may match, decide on samples
+                        if rows is not None and not rows:
+                            continue  # every value went out in a birth: acknowledged with the step, not sent
+                    if rows is not None:
                         merged.append((entry, rows))
                         continue
                     if not (self._send_rows(step, merged) and self._send_samples(step, entry)):

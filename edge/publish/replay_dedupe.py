@@ -62,6 +62,16 @@ def value_key(value: object) -> str:
 _timestamp_of = attrgetter("timestamp_ms")
 
 
+def _carried(births: Sequence[Birth], name: str, timestamp_ms: int, value: object) -> bool:
+    """One of these births carried this very value (name, CNC timestamp, value as the spool spells it)."""
+    for b in births:
+        carried = b.get(name)
+        if carried is not None and carried.timestamp_ms == timestamp_ms \
+                and value_key(carried.value) == value_key(value):
+            return True
+    return False
+
+
 class _SlotBirth:
     """A birth's values by position in a shared layout; reads like a dict by metric name (get, values)."""
 
@@ -98,6 +108,7 @@ class DeliveredValues:
         self._births_proven: dict[str, list[Birth]] = {}
         self._births_sent: dict[str, list[tuple[int, Birth]]] = {}
         self._stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys and births (and maybe gone ones)
+        self._key_stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys alone (a superset too)
         self._rows_proven: set[int] = set()
         self._rows_sent: dict[int, int] = {}  # spool row id -> the record call that sent it
         self._calls = 0
@@ -114,9 +125,11 @@ class DeliveredValues:
         self._calls += 1
         call = self._calls
         stamps = self._stamps.setdefault(device_id, set())
+        key_stamps = self._key_stamps.setdefault(device_id, set())
         for s in samples:
             self._sent.setdefault(_key(device_id, s), call)
             stamps.add(s.timestamp_ms)
+            key_stamps.add(s.timestamp_ms)
 
     def record_birth(self, device_id: str, values: Iterable[Sample]) -> None:
         """A DBIRTH carrying these values (one per metric) went out on the current connection."""
@@ -201,6 +214,7 @@ class DeliveredValues:
         self._births_proven = {}
         self._births_sent = {}
         self._stamps = {}
+        self._key_stamps = {}
         self._rows_proven = set()
         self._rows_sent = {}
 
@@ -208,6 +222,7 @@ class DeliveredValues:
         stamps: dict[str, set[int]] = {}
         for device_id, _, ts, _ in self._proven:
             stamps.setdefault(device_id, set()).add(ts)
+        self._key_stamps = {device_id: set(found) for device_id, found in stamps.items()}
         for device_id, births in self._births_proven.items():
             for b in births:
                 stamps.setdefault(device_id, set()).update(map(_timestamp_of, b.values()))
@@ -217,6 +232,21 @@ class DeliveredValues:
         """Values of the device with one of these CNC timestamps may be recorded (False: none is)."""
         stamps = self._stamps.get(device_id)
         return stamps is not None and not stamps.isdisjoint(timestamps)
+
+    def fresh_rows(self, device_id: str, rows: Sequence[Sequence[Any]]) -> list[Sequence[Any]] | None:
+        """`fresh` for a spool row's parsed rows [name, value, type, ts, quality] whose timestamps only births
+        may share: the rows the births did not carry (counting the others in `skipped`), no Sample built.
+        None when a recorded key may match (a timestamp of its keys) or a row's name or timestamp is not as
+        written (then `fresh` decides, on samples). A row whose timestamps overlap the births' was sent one
+        by one as samples before: ~11 % of a 1,000-machine backlog, kept until its step was acknowledged."""
+        key_stamps = self._key_stamps.get(device_id)
+        for row in rows:
+            if type(row[0]) is not str or type(row[3]) is not int or (key_stamps and row[3] in key_stamps):
+                return None
+        births = [*self._births_proven.get(device_id, ()), *(b for _, b in self._births_sent.get(device_id, ()))]
+        out = [row for row in rows if not _carried(births, row[0], row[3], row[1])]
+        self.skipped += len(rows) - len(out)
+        return out
 
     def _born(self, device_id: str, s: Sample) -> bool:
         """A birth on this connection, or a proven one, carried this very value."""

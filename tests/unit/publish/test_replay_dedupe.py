@@ -122,3 +122,17 @@ def test_a_birth_recorded_by_a_layouts_slots_skips_what_it_carried() -> None:
     d.proven(d.mark())
     d.connection_lost()
     assert d.fresh("m1", [s(1), s(4)]) == [s(4)], "a proven birth stays indexed across connections"
+
+
+def test_fresh_rows_leaves_out_what_births_carried_and_defers_to_samples_where_keys_may_match() -> None:
+    d = DeliveredValues()
+    d.record_birth("m1", [s(1), s(2, name="Macro/501")])
+    rows = [["Macro/500", 1.5, "Double", 1, 192], ["Macro/500", 2.5, "Double", 1, 192],
+            ["Macro/501", 1.5, "Double", 3, 192]]
+    assert d.fresh_rows("m1", rows) == rows[1:] and d.skipped == 1
+    assert d.fresh_rows("m1", [["Macro/500", 1.5, "Double", 1.0, 192]]) is None, "a timestamp not as written"
+    d.record("m1", [s(3)])
+    assert d.fresh_rows("m1", rows) is None, "a key at 3 may match: decided on samples"
+    assert d.fresh_rows("m1", rows[:2]) == rows[1:2]
+    d.connection_lost()
+    assert d.fresh_rows("m1", rows) == rows, "nothing proven: every value goes again"
