@@ -305,8 +305,8 @@ class SparkplugSession:
 
     def _send_births(self) -> None:
         """The NBIRTH now (the node metrics refreshed first: not live yet, recorded, not sent), then the
-        DBIRTHs over the next loop turns (`_dbirths`); the replay starts with the NBIRTH, each device's rows
-        after its DBIRTH."""
+        DBIRTHs over the next loop turns (`_dbirths`), which kick the replay after the last one (a probe
+        round may start it sooner: it then sends the rows of the devices born so far, and looks again)."""
         conn = self.link.conn
         if self.node_metrics_source is not None:
             self.node.set_node_metrics(self.node_metrics_source())
