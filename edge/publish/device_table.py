@@ -61,7 +61,7 @@ def layout_of(specs: Sequence[MetricSpec]) -> MetricLayout:
 class DeviceTable:
     """One device's (or the node's) own part: alias fields and last samples by the layout's positions."""
 
-    __slots__ = ("alias_data", "alias_ends", "data_topic", "last", "layout", "not_good", "online")
+    __slots__ = ("alias_data", "alias_ends", "born_in", "data_topic", "last", "layout", "not_good", "online")
 
     def __init__(self, layout: MetricLayout, aliases: Sequence[int], online: bool = False,
                  data_topic: str = "") -> None:
@@ -73,6 +73,7 @@ class DeviceTable:
         self.online = online
         self.not_good: set[str] = set()  # published last with a non-GOOD quality
         self.data_topic = data_topic  # its DDATA topic (NDATA for the node)
+        self.born_in = -1  # the node's birth generation its last DBIRTH went out in (edge.publish.node)
 
     def alias_field(self, position: int) -> bytes:
         """The alias field (DATA bytes) of the metric at `position`."""

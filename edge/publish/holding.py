@@ -41,6 +41,16 @@ class ReplaySpool(Protocol):
     def pending(self, fmt: Format | None = None) -> int: ...
 
 
+@runtime_checkable
+class IndexedSpool(Protocol):
+    """A replay spool that also hands out a step's row ids by device, and reads their bodies in parts
+    (edge.publish.spool.DiskSpool; the Sparkplug replay reads a step a few devices at a time)."""
+
+    def oldest_ids(self, fmt: Format, limit: int, devices: Any = None, *, after: int = 0) -> dict[str, list[int]]: ...
+
+    def read(self, fmt: Format, ids: Sequence[int]) -> Sequence[Any]: ...
+
+
 class DroppingSpool:
     """The default spool: counts what is lost."""
 

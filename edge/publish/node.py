@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from operator import attrgetter, itemgetter
 from typing import Any
 
+from edge.publish import birth_bytes
 from edge.publish import ddata as dd
 from edge.publish import payload as pl
 from edge.publish.aliases import NODE, AliasMap
@@ -95,6 +96,9 @@ class SparkplugNode:
         self._bdseq: int | None = None
         self.born = False  # an NBIRTH went out in the current MQTT session
         self.holding = False  # a rebirth is pending: DATA stops until the births are re-sent
+        # Counts NBIRTHs: a device is born (its DATA may go out) when its DBIRTH went out after the latest
+        # one (DeviceTable.born_in), so the DBIRTHs after an NBIRTH can go out over several loop turns.
+        self.generation = 0
         self._held_events: list[tuple[str, list[Sample]]] = []
         self._node = DeviceTable(layout_of(()), (), online=True)  # NDATA goes to _ndata_topic
         self._devices: dict[str, DeviceTable] = {}
@@ -143,6 +147,15 @@ class SparkplugNode:
 
     def births(self) -> list[Outgoing]:
         """NBIRTH (seq 0, same bdSeq) then a DBIRTH per online device, then any events held by a rebirth."""
+        out = [self.nbirth()]
+        for device_id in self.unborn_devices():
+            out.extend(self.dbirth(device_id))
+        out.extend(self.held_event_data())
+        return out
+
+    def nbirth(self) -> Outgoing:
+        """The NBIRTH (seq 0, same bdSeq): the node is live from here, each device from its `dbirth`
+        (`births` is this, every DBIRTH and `held_event_data`, at once)."""
         if self._bdseq is None:
             raise RuntimeError("births requested before session_started(bdseq)")
         self._seq = 0
@@ -151,15 +164,36 @@ class SparkplugNode:
         p.metrics.add(name=pl.BDSEQ_METRIC, datatype=DataType.Int64, timestamp=ts, long_value=self._bdseq)
         p.metrics.add(name=pl.REBIRTH_METRIC, datatype=DataType.Boolean, timestamp=ts, boolean_value=False)
         self._add_birth_metrics(p, NODE, self._node, ts)
-        out = [Outgoing(self.nbirth_topic, p.SerializeToString())]
+        out = Outgoing(self.nbirth_topic, p.SerializeToString())
         self.born = True
         self.holding = False
-        for device_id, dev in self._devices.items():
-            if dev.online:
-                out.append(self._dbirth(device_id, dev))
-        held, self._held_events = self._held_events, []
-        for device_id, events in held:
-            out.extend(self.device_events(device_id, events))
+        self.generation += 1
+        return out
+
+    def unborn_devices(self) -> list[str]:
+        """The online devices whose DBIRTH has not gone out since the latest NBIRTH."""
+        generation = self.generation
+        return [d for d, dev in self._devices.items() if dev.online and dev.born_in != generation]
+
+    def dbirth(self, device_id: str) -> list[Outgoing]:
+        """The device's DBIRTH, if the node is live and the device online and not born since the NBIRTH."""
+        dev = self._devices.get(device_id)
+        if dev is None or not (self.live and dev.online) or dev.born_in == self.generation:
+            return []
+        return [self._dbirth(device_id, dev)]
+
+    def held_event_data(self, device_id: str | None = None) -> list[Outgoing]:
+        """The DATA of the events a rebirth held (all, or one device's), after the births; taken."""
+        if device_id is None:
+            held, self._held_events = self._held_events, []
+        else:
+            held = [pair for pair in self._held_events if pair[0] == device_id]
+            if not held:
+                return []
+            self._held_events = [pair for pair in self._held_events if pair[0] != device_id]
+        out: list[Outgoing] = []
+        for held_id, events in held:
+            out.extend(self.device_events(held_id, events))
         return out
 
     def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
@@ -170,35 +204,55 @@ class SparkplugNode:
             return [(device_id, dev.last_samples())] if dev is not None and dev.online else []
         return [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
 
+    def birth_record(self, device_id: str) -> tuple[dict[str, Any], tuple[Sample | None, ...]] | None:
+        """What the device's DBIRTH carries, compactly: its layout's slots (shared by the devices declared
+        alike) and its last samples by position; None for a device that is not online."""
+        dev = self._devices.get(device_id)
+        return (dev.layout.slots, tuple(dev.last)) if dev is not None and dev.online else None
+
     def held_events(self) -> list[tuple[str, list[Sample]]]:
         """The events a rebirth held, which the next births() sends after the DBIRTHs."""
         return [(d, list(events)) for d, events in self._held_events]
 
     def _add_birth_metrics(self, p: Payload, device_key: str, dev: DeviceTable, ts: int) -> None:
-        alias_of = self._aliases.alias  # assigned when the device was declared: a lookup here
+        """The birth's metrics with the protobuf runtime (the NBIRTH; DBIRTHs: edge.publish.birth_bytes)."""
         for spec, sample in zip(dev.layout.specs.values(), dev.last, strict=True):
-            name = spec.name
-            value = None if sample is None else sample.value
-            quality = Quality.GOOD if sample is None else sample.quality
-            try:
-                m = pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, value,
-                                        ts if sample is None else sample.timestamp_ms, unit=spec.unit,
-                                        quality=quality, description=spec.description)
-            except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
-                self._encode_failed(name, exc)
-                del p.metrics[-1]
-                pl.add_birth_metric(p.metrics, name, alias_of(device_key, name), spec.type, None, ts,
-                                    unit=spec.unit, quality=Quality.BAD, description=spec.description)
-                continue
-            if sample is not None and sample.historical:
-                m.is_historical = True
+            self._add_birth_metric(p, device_key, spec, sample, ts)
         dev.not_good = {s.name for s in dev.last if s is not None and s.quality is not Quality.GOOD}
+
+    def _add_birth_metric(self, p: Payload, device_key: str, spec: MetricSpec, sample: Sample | None,
+                          ts: int) -> None:
+        alias = self._aliases.alias(device_key, spec.name)  # assigned when the device was declared
+        name = spec.name
+        value = None if sample is None else sample.value
+        quality = Quality.GOOD if sample is None else sample.quality
+        try:
+            m = pl.add_birth_metric(p.metrics, name, alias, spec.type, value,
+                                    ts if sample is None else sample.timestamp_ms, unit=spec.unit,
+                                    quality=quality, description=spec.description)
+        except (TypeError, ValueError, OverflowError) as exc:  # Overflow: float() of a huge int
+            self._encode_failed(name, exc)
+            del p.metrics[-1]
+            pl.add_birth_metric(p.metrics, name, alias, spec.type, None, ts,
+                                unit=spec.unit, quality=Quality.BAD, description=spec.description)
+            return
+        if sample is not None and sample.historical:
+            m.is_historical = True
 
     def _dbirth(self, device_id: str, dev: DeviceTable) -> Outgoing:
         ts = self._clock()
-        p = Payload(timestamp=ts, seq=self._next_seq())
-        self._add_birth_metrics(p, device_id, dev, ts)
-        return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), p.SerializeToString())
+        seq = self._next_seq()
+        specs = list(dev.layout.specs.values())
+
+        def runtime(position: int, at: int) -> bytes:  # one metric the byte writer leaves to protobuf
+            scratch = Payload()
+            self._add_birth_metric(scratch, device_id, specs[position], dev.last[position], at)
+            return scratch.SerializeToString()
+
+        payload = birth_bytes.birth_payload(ts, seq, birth_bytes.birth_metrics(dev, ts, runtime))
+        dev.not_good = {s.name for s in dev.last if s is not None and s.quality is not Quality.GOOD}
+        dev.born_in = self.generation
+        return Outgoing(self._device_topic.format(kind="DBIRTH", device=device_id), payload)
 
     def request_rebirth(self) -> bool:
         """Stop DATA at once (until births()); False if there is nothing born to rebirth."""
@@ -218,7 +272,7 @@ class SparkplugNode:
         out: list[Outgoing] = []
         if self.born:
             for device_id, dev in self._devices.items():
-                if dev.online:
+                if dev.online and dev.born_in == self.generation:
                     out.append(self._ddeath(device_id))
         if self._bdseq is not None:
             out.append(self.ndeath())
@@ -276,7 +330,7 @@ class SparkplugNode:
             return []
         known = self._known(device_id, dev, samples)
         dev.record(known)
-        if not (self.live and dev.online) or not known:
+        if not (self.live and dev.online and dev.born_in == self.generation) or not known:
             return []
         return [self._data(dev.data_topic, dev, known)]
 
@@ -292,7 +346,7 @@ class SparkplugNode:
         if self.holding:
             self._held_events.append((device_id, list(known)))
             return []
-        if not (self.live and dev.online):
+        if not (self.live and dev.online and dev.born_in == self.generation):
             return []
         return [self._data(dev.data_topic, dev, known)]
 
@@ -311,7 +365,7 @@ class SparkplugNode:
         ~150,000 values a second to replay). TypeError, ValueError or KeyError for a row that is not one
         (a corrupt spool), with no seq taken."""
         dev = self._devices.get(device_id)
-        if dev is None or not (self.live and dev.online):
+        if dev is None or not (self.live and dev.online and dev.born_in == self.generation):
             return []
         specs = dev.layout.slots
         if not all(map(specs.__contains__, map(_row_name, rows))):
@@ -329,13 +383,18 @@ class SparkplugNode:
         if dev is None or not dev.online:
             return []
         dev.online = False
-        if not self.born:
-            return []
+        if not self.born or dev.born_in != self.generation:
+            return []  # no DBIRTH since the NBIRTH (the births are still going out): nothing to end
         return [self._ddeath(device_id)]
 
     def is_online(self, device_id: str) -> bool:
         dev = self._devices.get(device_id)
         return dev is not None and dev.online
+
+    def is_live(self, device_id: str) -> bool:
+        """The device's DATA may go out now: the node live, the device online and born since the NBIRTH."""
+        dev = self._devices.get(device_id)
+        return self.live and dev is not None and dev.online and dev.born_in == self.generation
 
     def device_ids(self) -> list[str]:
         return list(self._devices)
@@ -346,6 +405,7 @@ class SparkplugNode:
         if old is not None:
             table.record([s for s in old.last_samples() if s.name in layout.slots])
             table.online, table.not_good, table.data_topic = old.online, old.not_good, old.data_topic
+            table.born_in = old.born_in
         return table
 
     def _ddeath(self, device_id: str) -> Outgoing:

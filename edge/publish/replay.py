@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 from operator import attrgetter
 from typing import Any, Protocol
 
-from edge.publish.holding import Format, ReplaySpool, Spool
+from edge.publish.holding import Format, IndexedSpool, ReplaySpool, Spool
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import MqttConnection
 from edge.publish.node import Outgoing
@@ -49,6 +49,7 @@ IN_FLIGHT = 3
 # the kernel, or QoS 1 not yet acknowledged): a broker slower than the pace then slows the replay instead of
 # filling the process's memory.
 HELD_BYTES = 1024 * 1024
+READ_ROWS = 256  # Sparkplug reads a step's bodies about this many rows (whole devices) at a time
 MERGE_ROWS = 16  # spool rows of one device in one replayed DDATA at most (~5 kB at 12 values a row)
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work at least, not each chunk
 MAX_SLICE_S = 0.1  # and after this much at most (what a live tick may wait for the replay)
@@ -164,6 +165,9 @@ class Replayer:
         # broker, not in the MQTT client (`_room`), and a step in flight keeps only its row ids.
         window: deque[tuple[asyncio.Future[bool], _Step]] = deque()
         after = 0  # the rows up to here are sent (and in flight or acked)
+        streamed = self._from_rows is not None and isinstance(spool, IndexedSpool)
+        by_device: dict[str, list[int]] = {}
+        entries: Sequence[Any] = []
         try:
             while current():
                 while window and (window[0][0].done() or len(window) >= IN_FLIGHT):
@@ -171,9 +175,15 @@ class Replayer:
                         return
                 if not current():
                     return
-                entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
-                                       after=after)
-                if not entries:
+                if streamed:  # ids only; the bodies are read a few devices at a time (`_send_streamed`)
+                    assert isinstance(spool, IndexedSpool)
+                    by_device = spool.oldest_ids(fmt, fetch, target.replay_devices(), after=after)
+                    last = max((ids[-1] for ids in by_device.values()), default=None)
+                else:
+                    entries = spool.oldest(fmt, fetch, target.replay_devices(), lazy=self._from_rows is not None,
+                                           after=after)
+                    last = entries[-1].id if entries else None
+                if last is None:
                     if window:
                         if not await confirmed(*window.popleft()):
                             return
@@ -183,12 +193,16 @@ class Replayer:
                         after = 0
                         continue
                     break
-                after = entries[-1].id
+                after = last
                 step = _Step(conn, current)
-                if self._from_rows is not None:
+                if streamed:
+                    ok = await self._send_streamed(step, by_device, pacer)
+                    by_device = {}
+                elif self._from_rows is not None:
                     ok = await self._send_by_device(step, entries, pacer)
                 else:
                     ok = await self._send_each(step, entries, pacer)
+                entries = []  # not alive while the next step is read
                 if not ok:
                     return
                 await pacer.pace(force=True)
@@ -224,10 +238,30 @@ class Replayer:
                 await self._pace(step, pacer)
         return True
 
+    async def _send_streamed(self, step: _Step, by_device: dict[str, list[int]], pacer: _Pacer) -> bool:
+        """A step's rows, by device (`_send_by_device`), their bodies read READ_ROWS rows' worth of devices
+        at a time: the step's ids are small, its ~9 MB of bodies are not alive at once."""
+        spool = self._spool
+        assert isinstance(spool, IndexedSpool)
+        fmt = self._link.fmt
+        chunk: list[int] = []
+        for ids in by_device.values():
+            chunk.extend(ids)
+            if len(chunk) >= READ_ROWS:
+                chunk.sort()
+                if not await self._send_by_device(step, spool.read(fmt, chunk), pacer):
+                    return False
+                chunk = []
+        if chunk:
+            chunk.sort()
+            return await self._send_by_device(step, spool.read(fmt, chunk), pacer)
+        return True
+
     async def _send_by_device(self, step: _Step, entries: Sequence[Any], pacer: _Pacer) -> bool:
         """Sparkplug: a step's rows of one device, oldest first, in DDATA of up to MERGE_ROWS rows each,
-        straight from their parsed rows. A row whose values the host may have goes through the dedupe on
-        its own, after the rows before it (so each device's rows still go out in spool order)."""
+        straight from their parsed rows, without the values a birth carried. A row whose values a recorded
+        key may match goes through the dedupe on its own, as samples, after the rows before it (so each
+        device's rows still go out in spool order)."""
         delivered = self._delivered
         groups: dict[str, list[Any]] = {}
         for entry in entries:
@@ -239,8 +273,12 @@ class Replayer:
                 merged: list[tuple[Any, list[Any]]] = []
                 for entry in part:
                     rows = entry.rows()
-                    if rows is not None and (delivered is None
-                                             or not delivered.overlaps(device_id, map(TIMESTAMP, rows))):
+                    if rows is not None and delivered is not None \
+                            and delivered.overlaps(device_id, map(TIMESTAMP, rows)):
+                        rows = delivered.fresh_rows(device_id, rows)  # None: keys may match, decide on samples
+                        if rows is not None and not rows:
+                            continue  # every value went out in a birth: acknowledged with the step, not sent
+                    if rows is not None:
                         merged.append((entry, rows))
                         continue
                     if not (self._send_rows(step, merged) and self._send_samples(step, entry)):
@@ -282,6 +320,7 @@ class Replayer:
         delivered = self._delivered
         if delivered is not None:
             samples = delivered.fresh(entry.device_id, samples)
+        self._counters["replayed_rows_as_samples"] += 1  # the slow path: a row whose values the host may have
         if not samples:
             return True
         if not all(map(_historical_of, samples)):  # the spool hands them out historical already

@@ -245,6 +245,55 @@ class DiskSpool:
                     self._drop_unreadable(db, int(row_id), exc)
             return out
 
+    def oldest_ids(self, fmt: Format, limit: int, devices: Collection[str] | None = None, *,
+                   after: int = 0) -> dict[str, list[int]]:
+        """`oldest` without the bodies: the ids of up to `limit` rows by device (each device's oldest first,
+        devices in the order of their first row), for a replay that reads the bodies a few devices at a
+        time (`read`): a step of ~9,000 rows of ~1 kB read at once is ~9 MB of short-lived blocks, which
+        the live ticks' allocations in between leave as a fragmented heap."""
+        with self._lock:
+            self._save()
+            db = self._conn()
+            self._retry_acked(db)
+            self._enforce_age(db)
+            want = limit + len(self._acked)
+            if devices is None:
+                cursor = db.execute("SELECT id, device FROM spool WHERE fmt = ? AND id > ? ORDER BY id LIMIT ?",
+                                    (fmt, after, want))
+            else:
+                wanted = sorted(devices)
+                if not wanted:
+                    return {}
+                marks = ",".join("?" * len(wanted))
+                cursor = db.execute(f"SELECT id, device FROM spool WHERE fmt = ? AND id > ? AND device "
+                                    f"IN ({marks}) ORDER BY id LIMIT ?", (fmt, after, *wanted, want))
+            out: dict[str, list[int]] = {}
+            acked, taken = self._acked, 0
+            for row_id, device in cursor:
+                if taken >= limit:
+                    break
+                if row_id in acked:
+                    continue
+                ids = out.get(device)
+                if ids is None:
+                    out[device] = ids = []
+                ids.append(row_id)
+                taken += 1
+            return out
+
+    def read(self, fmt: Format, ids: Sequence[int]) -> list[SpoolEntry]:
+        """These rows (ids from `oldest_ids`) as lazy entries (edge.publish.spool_rows.read_entry), in id
+        order; a row gone meanwhile (the age bound) is left out."""
+        if not ids:
+            return []
+        with self._lock:
+            db = self._conn()
+            marks = ",".join("?" * len(ids))
+            rows = db.execute(f"SELECT id, device, kind, body FROM spool WHERE id IN ({marks}) ORDER BY id",
+                              list(ids)).fetchall()
+            return [read_entry(int(row_id), fmt, str(device), "events" if kind == "events" else "data",
+                               bytes(body), lazy=True) for row_id, device, kind, body in rows]
+
     def unreadable(self, row_id: int, error: Exception) -> None:
         """A row handed out that its reader could not read: deleted and counted, as `oldest` does."""
         with self._lock:

@@ -5,6 +5,7 @@ Every check decodes what an independent subscriber received.
 
 from __future__ import annotations
 
+import asyncio
 import json
 from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
@@ -340,3 +341,53 @@ async def test_session_termination(make_publisher: Callable[..., Publisher], obs
     assert {bdseq_of(m) for m in msgs if m.kind == "NDEATH"} == {0}
     check_seq_chain(msgs)
     assert not pub.connected
+
+
+async def test_dbirths_go_out_over_loop_turns_with_live_data_between(
+        make_publisher: Callable[..., Publisher], observer: Observer, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The DBIRTHs after an NBIRTH go out over several loop turns (each its own turn here), live data flowing
+    between them: a device's DDATA only after its own DBIRTH, the seq one chain, and the ticks of a device
+    not yet born spooled and replayed (historical) after its DBIRTH, or carried by it."""
+    from edge.publish import sparkplug_session
+    from edge.publish.spool import DiskSpool
+
+    monkeypatch.setattr(sparkplug_session, "BIRTH_SLICE_S", 0.0)
+    devices = [f"cnc{i}" for i in range(30)]
+    spool = DiskSpool(tmp_path / "spool.sqlite")
+    pub = make_publisher()
+    pub = Publisher(pub.settings, spool=spool)
+    for device_id in devices:
+        await pub.device_online(device_id, SPECS, samples())
+    await pub.start()
+    sent: dict[str, list[float]] = {d: [] for d in devices}
+    tick = 0
+    while len(observer.of("DBIRTH")) < len(devices):
+        tick += 1
+        for device_id in devices:
+            speed = float(tick)
+            sent[device_id].append(speed)
+            await pub.device_data(device_id, [Sample("Spindle/1/Speed", speed, MetricType.DOUBLE, TS + tick)])
+        await asyncio.sleep(0.002)
+        assert tick < 5_000, "every DBIRTH within ~10 s"
+    await async_wait_for(lambda: spool.pending() == 0, message="the spooled ticks replayed")
+    await pub.stop()
+
+    msgs = [m for m in observer.snapshot() if m.kind in ("NBIRTH", "DBIRTH", "DDATA")]
+    check_seq_chain(msgs)
+    assert msgs[0].kind == "NBIRTH"
+    born: set[str] = set()
+    arrived: dict[str, set[float]] = {d: set() for d in devices}
+    data_between = 0
+    for m in msgs[1:]:
+        device_id = m.topic.rsplit("/", 1)[-1]
+        if m.kind == "DBIRTH":
+            born.add(device_id)
+            arrived[device_id].add(metrics_by_name(m.spb())["Spindle/1/Speed"].double_value)
+            continue
+        assert device_id in born, f"DDATA of {device_id} before its DBIRTH"
+        data_between += len(born) < len(devices)
+        arrived[device_id].update(metric.double_value for metric in m.spb().metrics)
+    assert data_between, "live data went out between the DBIRTHs"
+    for device_id in devices:
+        assert set(sent[device_id]) <= arrived[device_id], f"{device_id}: every tick arrived"

@@ -69,6 +69,7 @@ async def report(daemon: Daemon, started: float) -> None:
                 "tasks": len(asyncio.all_tasks()), "spool_rows": counters.get("spool_rows", 0),
                 "unconfirmed": counters.get("unconfirmed_batches", 0),
                 "suspect_dead": counters.get("suspect_dead", 0), "replayed_rows": counters.get("replayed_rows", 0),
+                "replayed_as_samples": counters.get("replayed_rows_as_samples", 0),
                 "samples_dropped": counters.get("samples_dropped", 0),
                 "online": sum(1 for p in daemon.pollers.values() if p.online), "born": daemon.publisher.ready}
         if probing is not None:

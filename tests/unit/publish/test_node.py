@@ -191,3 +191,40 @@ def test_bdseq_persisted_wraps_and_reuses_an_unsent_attempt(tmp_path: Path) -> N
     assert BdSeqCounter(StateStore(tmp_path)).next_for_connect() == 0
     (tmp_path / "sparkplug_bdseq.json").write_text("{torn")
     assert BdSeqCounter(StateStore(tmp_path)).next_for_connect() == 0  # corrupt file: start fresh, logged
+
+
+def test_dbirths_after_the_nbirth_one_by_one_each_device_live_from_its_own() -> None:
+    """The births in parts (the session sends the DBIRTHs over several loop turns): a device's DATA goes out
+    only after its own DBIRTH (before it, the value is recorded and its DBIRTH carries it), a device going
+    offline before its DBIRTH sends no DDEATH, and the seq runs on across the parts."""
+    n = node()
+    for device_id in ("m1", "m2", "m3"):
+        n.device_online(device_id, SPECS, [])
+    nbirth = n.nbirth()
+    assert n.live and n.unborn_devices() == ["m1", "m2", "m3"]
+    (m1,) = n.dbirth("m1")
+    assert n.dbirth("m1") == [], "born once per NBIRTH"
+    (data1,) = n.device_data("m1", [Sample("Macro/500", 1.0, MetricType.DOUBLE, 10)])
+    assert n.is_live("m1") and not n.is_live("m2")
+    assert n.device_data("m2", [Sample("Macro/500", 2.0, MetricType.DOUBLE, 11)]) == []
+    assert n.historical_rows("m2", [["Macro/500", 2.0, None, 11, 192]]) == []
+    assert n.device_offline("m3") == [], "no DDEATH for a device not born since the NBIRTH"
+    assert n.unborn_devices() == ["m2"]
+    (m2,) = n.dbirth("m2")
+    assert {m.name: m for m in pl.decode(m2.payload).metrics}["Macro/500"].double_value == 2.0
+    assert seqs([nbirth, m1, data1, m2]) == [0, 1, 2, 3]
+    assert [m.topic for m in n.shutdown()] == ["spBv1.0/G/DDEATH/E/m1", "spBv1.0/G/DDEATH/E/m2",
+                                                 "spBv1.0/G/NDEATH/E"]
+
+
+def test_a_new_nbirth_makes_every_device_unborn_until_its_dbirth() -> None:
+    n = node()
+    n.device_online("m1", SPECS, [])
+    n.births()
+    assert n.is_live("m1")
+    assert n.request_rebirth() and not n.is_live("m1")
+    n.nbirth()
+    assert not n.is_live("m1") and n.unborn_devices() == ["m1"]
+    assert n.device_data("m1", [Sample("Macro/500", 1.0, MetricType.DOUBLE, 10)]) == []
+    n.dbirth("m1")
+    assert n.is_live("m1")

@@ -108,3 +108,31 @@ def test_birth_values_are_kept_by_reference_and_follow_the_connection() -> None:
     assert d.fresh("m1", [s(1), s(4)]) == [s(4)] and len(d) == 0, "births are not keys"
     d.forget()
     assert d.fresh("m1", [s(1)]) == [s(1)]
+
+
+def test_a_birth_recorded_by_a_layouts_slots_skips_what_it_carried() -> None:
+    """The session records a DBIRTH as its device table's samples by position and the layout's shared
+    slots (no dict per device): the same answers as a birth recorded as samples."""
+    d = DeliveredValues()
+    slots = {"Macro/500": (0,), "Macro/501": (1,), "Macro/502": (2,)}
+    d.record_birth_slots("m1", slots, (s(1), s(2, name="Macro/501"), None))
+    assert d.fresh("m1", [s(1), s(1, value=2.5), s(3), s(2, name="Macro/502")]) == \
+        [s(1, value=2.5), s(3), s(2, name="Macro/502")]
+    assert d.fresh("m1", [s(2)]) == [s(2)], "the birth carried Macro/501 at 2, not Macro/500"
+    d.proven(d.mark())
+    d.connection_lost()
+    assert d.fresh("m1", [s(1), s(4)]) == [s(4)], "a proven birth stays indexed across connections"
+
+
+def test_fresh_rows_leaves_out_what_births_carried_and_defers_to_samples_where_keys_may_match() -> None:
+    d = DeliveredValues()
+    d.record_birth("m1", [s(1), s(2, name="Macro/501")])
+    rows = [["Macro/500", 1.5, "Double", 1, 192], ["Macro/500", 2.5, "Double", 1, 192],
+            ["Macro/501", 1.5, "Double", 3, 192]]
+    assert d.fresh_rows("m1", rows) == rows[1:] and d.skipped == 1
+    assert d.fresh_rows("m1", [["Macro/500", 1.5, "Double", 1.0, 192]]) is None, "a timestamp not as written"
+    d.record("m1", [s(3)])
+    assert d.fresh_rows("m1", rows) is None, "a key at 3 may match: decided on samples"
+    assert d.fresh_rows("m1", rows[:2]) == rows[1:2]
+    d.connection_lost()
+    assert d.fresh_rows("m1", rows) == rows, "nothing proven: every value goes again"

@@ -78,3 +78,42 @@ def test_a_devices_rows_share_ddata_in_order_and_a_row_the_host_may_have_goes_al
     assert [pl.decode(payload).seq for payload in kept] == list(range(3, 3 + len(sent)))
     assert spool.pending() == 0 and delivered.skipped == 1
     spool.close()
+
+
+def test_values_a_birth_carried_are_left_out_of_the_merged_rows_without_samples(tmp_path: Path) -> None:
+    """Rows whose timestamps only births share stay on the merged path: the values a DBIRTH carried are
+    left out (counted as skipped), the row's other values go out in the same DDATA, no row as samples."""
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    for i in range(6):
+        spool.hold("sparkplug", "m1", "data", [Sample("a", float(i), MetricType.DOUBLE, 100 + i),
+                                               Sample("b", float(-i), MetricType.DOUBLE, 100 + i)])
+    node = SparkplugNode("G", "E", AliasMap(None), clock=lambda: 1)
+    node.session_started(1)
+    node.device_online("m1", [MetricSpec("a", MetricType.DOUBLE), MetricSpec("b", MetricType.DOUBLE)], [])
+    node.births()
+    delivered = DeliveredValues()
+    # The DBIRTH carried a = 3.0 at 103 (its latest) and b = -5.0 at 105; b = 9.0 at 103 was not sent.
+    delivered.record_birth("m1", [Sample("a", 3.0, MetricType.DOUBLE, 103), Sample("b", -5.0, MetricType.DOUBLE, 105)])
+    counters: Counter[str] = Counter()
+    kept = _replay(spool, node, delivered, counters)
+    sent = [[(m.timestamp, m.double_value) for m in pl.decode(payload).metrics] for payload in kept]
+    everything = [(100 + i, v) for i in range(6) for v in (float(i), float(-i))]
+    assert sent == [[pair for pair in everything if pair not in {(103, 3.0), (105, -5.0)}]], "one DDATA"
+    assert delivered.skipped == 2 and counters["replayed_rows_as_samples"] == 0
+    assert spool.pending() == 0 and counters["replayed_rows"] == 6
+    spool.close()
+
+
+def test_a_row_whose_every_value_a_birth_carried_is_acknowledged_and_not_sent(tmp_path: Path) -> None:
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    spool.hold("sparkplug", "m1", "data", [Sample("a", 1.0, MetricType.DOUBLE, 100)])
+    node = SparkplugNode("G", "E", AliasMap(None), clock=lambda: 1)
+    node.session_started(1)
+    node.device_online("m1", [MetricSpec("a", MetricType.DOUBLE)], [])
+    node.births()
+    delivered = DeliveredValues()
+    delivered.record_birth("m1", [Sample("a", 1.0, MetricType.DOUBLE, 100)])
+    counters: Counter[str] = Counter()
+    assert _replay(spool, node, delivered, counters) == []
+    assert spool.pending() == 0 and delivered.skipped == 1 and counters["replayed_rows"] == 1
+    spool.close()

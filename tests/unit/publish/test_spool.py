@@ -269,3 +269,23 @@ def test_a_lazy_row_not_shaped_as_written_has_no_rows_and_a_reader_may_drop_it(t
     (lenient,) = spool.oldest("sparkplug", 10, lazy=True)
     assert lenient.rows() is not None and lenient.samples[0].timestamp_ms == 5, "a float timestamp: read leniently"
     spool.close()
+
+
+def test_row_ids_by_device_then_bodies_read_in_parts(tmp_path: Path) -> None:
+    """The Sparkplug replay's reads: a step's ids by device (oldest first, only after `after`, only the
+    devices asked for), then the rows of some of them, lazy, in id order; a row gone meanwhile is left out."""
+    spool = DiskSpool(tmp_path / "s.sqlite")
+    for i, device in enumerate(["m1", "m2", "m1", "m3", "m2"]):
+        spool.hold("sparkplug", device, "data", [Sample("x", float(i), MetricType.DOUBLE, i)])
+    spool.hold("json", "m1", "data", [Sample("x", 9.0, MetricType.DOUBLE, 9)])
+    ids = spool.oldest_ids("sparkplug", 10)
+    assert list(ids) == ["m1", "m2", "m3"] and [len(v) for v in ids.values()] == [2, 2, 1]
+    assert spool.oldest_ids("sparkplug", 3) == {"m1": ids["m1"], "m2": ids["m2"][:1]}
+    assert spool.oldest_ids("sparkplug", 10, devices={"m2"}) == {"m2": ids["m2"]}
+    assert spool.oldest_ids("sparkplug", 10, devices=set()) == {}
+    assert spool.oldest_ids("sparkplug", 10, after=ids["m1"][1]) == {"m3": ids["m3"], "m2": ids["m2"][1:]}
+    spool.ack([ids["m1"][0]])
+    entries = spool.read("sparkplug", sorted(ids["m2"] + ids["m1"]))
+    assert [(e.id, e.device_id) for e in entries] == sorted([(i, "m2") for i in ids["m2"]] + [(ids["m1"][1], "m1")])
+    assert [s.value for e in entries for s in e.samples] == [1.0, 2.0, 4.0]
+    assert all(s.historical for e in entries for s in e.samples)
