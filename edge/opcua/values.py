@@ -163,8 +163,8 @@ _QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quali
 def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
     """The DataValue a node shows for `sample` (value of the node's type, or null with a Bad status).
 
-    Called for every monitored value change: `ticks`, the conversion of a value already of the node's Python
-    type and `_lazy` are inlined."""
+    Called for every monitored value change: `ticks` and the conversion of a value already of the node's Python
+    type are inlined."""
     status, bad, code = _QUALITY_STATUS.get(sample.quality) or _status_of(sample.quality)
     stamp = sample.timestamp_ms
     source = (stamp + WIN_EPOCH_OFFSET_MS) * TICKS_PER_MS if MIN_MS < stamp < MAX_MS else ticks(stamp)
@@ -179,14 +179,7 @@ def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
             except (struct.error, OverflowError):  # outside the node's type (an Int16 of 40000)
                 encoded = None
             if encoded is not None:
-                made = _new(LazyDataValue)
-                made.raw = value
-                made.vtype = vtype
-                made.StatusCode = status
-                made.stamp = stamp
-                made.server = server
-                made.encoded = encoded
-                return made
+                return _lazy(value, vtype, status, stamp, server, encoded)
         status = status_code("BadTypeMismatch")
         code = status.value
     encoded = _NULL_ENCODER(None, code, source, server.ticks)

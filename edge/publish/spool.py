@@ -219,21 +219,11 @@ class DiskSpool:
         A row whose body cannot be read is deleted and counted as dropped (it would block replay forever).
         """
         with self._lock:
-            self._save()
             db = self._conn()
-            self._retry_acked(db)
-            self._enforce_age(db)
-            want = limit + len(self._acked)
-            if devices is None:
-                rows = db.execute("SELECT id, device, kind, body FROM spool WHERE fmt = ? AND id > ? ORDER BY id "
-                                  "LIMIT ?", (fmt, after, want)).fetchall()
-            else:
-                wanted = sorted(devices)
-                if not wanted:
-                    return []
-                marks = ",".join("?" * len(wanted))
-                rows = db.execute(f"SELECT id, device, kind, body FROM spool WHERE fmt = ? AND id > ? AND device "
-                                  f"IN ({marks}) ORDER BY id LIMIT ?", (fmt, after, *wanted, want)).fetchall()
+            cursor = self._oldest_rows(db, "id, device, kind, body", fmt, limit, devices, after)
+            if cursor is None:
+                return []
+            rows = cursor.fetchall()
             out: list[SpoolEntry] = []
             for row_id, device, kind, body in rows:
                 if row_id in self._acked or len(out) >= limit:
@@ -252,21 +242,9 @@ class DiskSpool:
         time (`read`): a step of ~9,000 rows of ~1 kB read at once is ~9 MB of short-lived blocks, which
         the live ticks' allocations in between leave as a fragmented heap."""
         with self._lock:
-            self._save()
-            db = self._conn()
-            self._retry_acked(db)
-            self._enforce_age(db)
-            want = limit + len(self._acked)
-            if devices is None:
-                cursor = db.execute("SELECT id, device FROM spool WHERE fmt = ? AND id > ? ORDER BY id LIMIT ?",
-                                    (fmt, after, want))
-            else:
-                wanted = sorted(devices)
-                if not wanted:
-                    return {}
-                marks = ",".join("?" * len(wanted))
-                cursor = db.execute(f"SELECT id, device FROM spool WHERE fmt = ? AND id > ? AND device "
-                                    f"IN ({marks}) ORDER BY id LIMIT ?", (fmt, after, *wanted, want))
+            cursor = self._oldest_rows(self._conn(), "id, device", fmt, limit, devices, after)
+            if cursor is None:
+                return {}
             out: dict[str, list[int]] = {}
             acked, taken = self._acked, 0
             for row_id, device in cursor:
@@ -280,6 +258,25 @@ class DiskSpool:
                 ids.append(row_id)
                 taken += 1
             return out
+
+    def _oldest_rows(self, db: sqlite3.Connection, columns: str, fmt: Format, limit: int,
+                     devices: Collection[str] | None, after: int) -> sqlite3.Cursor | None:
+        """The oldest rows' `columns` for `oldest` and `oldest_ids` (the lock held): what is pending saved,
+        acked rows retried, the age bound kept first; `limit` plus the acked rows (skipped by the caller);
+        None when `devices` names none."""
+        self._save()
+        self._retry_acked(db)
+        self._enforce_age(db)
+        want = limit + len(self._acked)
+        if devices is None:
+            return db.execute(f"SELECT {columns} FROM spool WHERE fmt = ? AND id > ? ORDER BY id LIMIT ?",
+                              (fmt, after, want))
+        wanted = sorted(devices)
+        if not wanted:
+            return None
+        marks = ",".join("?" * len(wanted))
+        return db.execute(f"SELECT {columns} FROM spool WHERE fmt = ? AND id > ? AND device IN ({marks}) "
+                          f"ORDER BY id LIMIT ?", (fmt, after, *wanted, want))
 
     def read(self, fmt: Format, ids: Sequence[int]) -> list[SpoolEntry]:
         """These rows (ids from `oldest_ids`) as lazy entries (edge.publish.spool_rows.read_entry), in id
