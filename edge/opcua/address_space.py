@@ -27,7 +27,7 @@ from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, notify_all, taps_of
+from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, enqueue, notify_all, taps_of
 from edge.opcua.values import (
     ServerTime,
     SharedDataValue,
@@ -279,16 +279,9 @@ class GatewaySpace:
             if taps:
                 if previous is None or not same_reading(previous, value):
                     encoded = value.encoded
-                    for values, mid, prefix, bound, subscription in taps:  # GatewayMonitoredItems.notify, inlined
+                    for values, mid, prefix, bound, subscription in taps:  # GatewayMonitoredItems.notify's work
                         values.current_dvalue = value
-                        queue = subscription._triggered_datachanges
-                        pending = queue.get(mid)
-                        if pending is None:
-                            queue[mid] = [prefix + encoded]
-                        else:
-                            if len(pending) >= bound:
-                                del pending[0]  # asyncua's choice whatever DiscardOldest says: the oldest goes
-                            pending.append(prefix + encoded)
+                        enqueue(subscription._triggered_datachanges, mid, prefix + encoded, bound)
                 else:
                     for tap in taps:
                         tap[0].current_dvalue = value

@@ -60,6 +60,18 @@ def _changed() -> None:
     CHANGES[0] += 1
 
 
+def enqueue(queue: dict[int, list[Any]], mid: int, note: Any, bound: int) -> None:
+    """Queue a notification for monitored item `mid` in its subscription's pending changes, at most `bound`
+    of them (asyncua's choice whatever DiscardOldest says: the oldest goes)."""
+    pending = queue.get(mid)
+    if pending is None:
+        queue[mid] = [note]
+        return
+    if len(pending) >= bound:
+        del pending[0]
+    pending.append(note)
+
+
 class GatewayMonitoredItems(MonitoredItemService):
     """asyncua's monitored items of one subscription, with a synchronous path for a value change."""
 
@@ -95,14 +107,7 @@ class GatewayMonitoredItems(MonitoredItemService):
         # a client's subscription queues the notification's bytes; the server's own ones read objects
         note: Any = prefix + data_value_bytes(value) if subscription.pub_request_callback is not None \
             else (item.client_handle, value)
-        queue = subscription._triggered_datachanges
-        pending = queue.get(mid)
-        if pending is None:
-            queue[mid] = [note]
-            return True
-        if item.queue_size and len(pending) >= item.queue_size:
-            del pending[0]  # asyncua's choice whatever DiscardOldest says: the oldest goes
-        pending.append(note)
+        enqueue(subscription._triggered_datachanges, mid, note, item.queue_size or _UNBOUNDED)
         return True
 
     def tap(self, handle: int) -> Tap | None:

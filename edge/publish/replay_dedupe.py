@@ -62,7 +62,7 @@ def value_key(value: object) -> str:
 _timestamp_of = attrgetter("timestamp_ms")
 
 
-def _carried(births: Sequence[Birth], name: str, timestamp_ms: int, value: object) -> bool:
+def _carried(births: Sequence[_SlotBirth], name: str, timestamp_ms: int, value: object) -> bool:
     """One of these births carried this very value (name, CNC timestamp, value as the spool spells it)."""
     for b in births:
         carried = b.get(name)
@@ -89,8 +89,6 @@ class _SlotBirth:
         return [s for s in self.last if s is not None]
 
 
-Birth = dict[str, Sample] | _SlotBirth
-
 
 def _key(device_id: str, sample: Sample) -> Key:
     return device_id, sample.name, sample.timestamp_ms, value_key(sample.value)
@@ -105,8 +103,8 @@ class DeliveredValues:
         self._sent: dict[Key, int] = {}  # key -> the record call that added it (a barrier proves earlier ones)
         # The values births carried, per device: the samples themselves by metric name, no key built (a
         # DBIRTH of every machine is every metric of the fleet: ~20 MB of keys at 1,000 x 100 metrics).
-        self._births_proven: dict[str, list[Birth]] = {}
-        self._births_sent: dict[str, list[tuple[int, Birth]]] = {}
+        self._births_proven: dict[str, list[_SlotBirth]] = {}
+        self._births_sent: dict[str, list[tuple[int, _SlotBirth]]] = {}
         self._stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys and births (and maybe gone ones)
         self._key_stamps: dict[str, set[int]] = {}  # device -> timestamps of its keys alone (a superset too)
         self._rows_proven: set[int] = set()
@@ -133,7 +131,8 @@ class DeliveredValues:
 
     def record_birth(self, device_id: str, values: Iterable[Sample]) -> None:
         """A DBIRTH carrying these values (one per metric) went out on the current connection."""
-        self._add_birth(device_id, {s.name: s for s in values})
+        last = list(values)
+        self.record_birth_slots(device_id, {s.name: (i,) for i, s in enumerate(last)}, last)
 
     def record_birth_slots(self, device_id: str, slots: Mapping[str, tuple[Any, ...]],
                            last: Sequence[Sample | None]) -> None:
@@ -142,7 +141,7 @@ class DeliveredValues:
         metrics, 1,000 of them kept until the replay ends)."""
         self._add_birth(device_id, _SlotBirth(slots, last))
 
-    def _add_birth(self, device_id: str, birth: Birth) -> None:
+    def _add_birth(self, device_id: str, birth: _SlotBirth) -> None:
         self._calls += 1
         self._births_sent.setdefault(device_id, []).append((self._calls, birth))
         self._stamps.setdefault(device_id, set()).update(map(_timestamp_of, birth.values()))
@@ -243,20 +242,18 @@ class DeliveredValues:
         for row in rows:
             if type(row[0]) is not str or type(row[3]) is not int or (key_stamps and row[3] in key_stamps):
                 return None
-        births = [*self._births_proven.get(device_id, ()), *(b for _, b in self._births_sent.get(device_id, ()))]
+        births = self._births_of(device_id)
         out = [row for row in rows if not _carried(births, row[0], row[3], row[1])]
         self.skipped += len(rows) - len(out)
         return out
 
     def _born(self, device_id: str, s: Sample) -> bool:
         """A birth on this connection, or a proven one, carried this very value."""
-        births = [b for _, b in self._births_sent.get(device_id, ())]
-        for b in (*self._births_proven.get(device_id, ()), *births):
-            carried = b.get(s.name)
-            if carried is not None and carried.timestamp_ms == s.timestamp_ms \
-                    and value_key(carried.value) == value_key(s.value):
-                return True
-        return False
+        return _carried(self._births_of(device_id), s.name, s.timestamp_ms, s.value)
+
+    def _births_of(self, device_id: str) -> list[_SlotBirth]:
+        """The device's births, proven and on this connection."""
+        return [*self._births_proven.get(device_id, ()), *(b for _, b in self._births_sent.get(device_id, ()))]
 
     def fresh(self, device_id: str, samples: Sequence[Sample]) -> Sequence[Sample]:
         """The samples the host does not have yet (counting the others in `skipped`); `samples` itself when
