@@ -196,14 +196,6 @@ class SparkplugNode:
             out.extend(self.device_events(held_id, events))
         return out
 
-    def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
-        """The device values births carry (each online device's latest, or one device's): what the next
-        births() (or that device's DBIRTH) will send, beside `held_events`."""
-        if device_id is not None:
-            dev = self._devices.get(device_id)
-            return [(device_id, dev.last_samples())] if dev is not None and dev.online else []
-        return [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
-
     def birth_record(self, device_id: str) -> tuple[dict[str, Any], tuple[Sample | None, ...]] | None:
         """What the device's DBIRTH carries, compactly: its layout's slots (shared by the devices declared
         alike) and its last samples by position; None for a device that is not online."""
