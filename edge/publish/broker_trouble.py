@@ -19,6 +19,7 @@ import ssl
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 
 SUMMARY_EVERY_S = 60.0
 
@@ -42,16 +43,56 @@ _NOBODY_THERE = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNR
                            errno.ETIMEDOUT})
 
 
+class Answer(Enum):
+    """What a failed connect attempt met; it sets how soon the next one goes (edge.publish.mqtt.retry_delay)."""
+
+    NOBODY = "nobody"  # nothing listened at the broker's port: the attempt cost no broker anything
+    NOT_SERVING = "not serving"  # accepted, then closed before CONNACK, or CONNACK "server unavailable/busy"
+    REJECTED = "rejected"  # turned down on its merits (credentials, TLS, a name): a retry alone does not fix it
+
+
+# CONNACK reason codes (MQTT 5 numbering; paho maps 3.1.1's "server unavailable" to 0x88) of a broker that
+# would take the client but cannot now.
+_BUSY_CONNACK = frozenset({0x88, 0x89})
+
+
 def nobody_answered(error: BaseException) -> bool:
     """The attempt ended before any broker process saw it: the port refused, the host or network was
     unreachable, or the TCP connect timed out. Such an attempt costs the broker nothing, so it may be repeated
-    often (edge.publish.mqtt probes at ~1 s); a name that does not resolve, a TLS failure or a refused
-    CONNECT are answers, and keep the growing backoff."""
+    often (edge.publish.mqtt probes at ~0.5 s)."""
     if isinstance(error, socket.gaierror) or is_tls_failure(error):
         return False
     if isinstance(error, TimeoutError | ConnectionRefusedError):
         return True
     return isinstance(error, OSError) and error.errno in _NOBODY_THERE
+
+
+def answer_to_error(error: BaseException) -> Answer:
+    """A connect attempt that raised: nobody there, a peer that accepted and then reset or closed the
+    connection (TLS included: an EOF is not a certificate problem), or a rejection (a name that does not
+    resolve, a TLS failure, anything else)."""
+    if nobody_answered(error):
+        return Answer.NOBODY
+    if isinstance(error, ConnectionResetError | ConnectionAbortedError | BrokenPipeError | ssl.SSLEOFError
+                  | ssl.SSLZeroReturnError):
+        return Answer.NOT_SERVING
+    return Answer.REJECTED
+
+
+def answer_to_close(cause: str) -> Answer:
+    """A connection closed before its CONNACK (`cause`: paho's first error, or the disconnect reason): a
+    broker, or a proxy in front of one, that is not serving; unless the cause is a TLS alert or a refused
+    login (a client certificate the broker requires), which a retry does not fix."""
+    text = cause.lower()
+    if classify(cause) == NOT_AUTHORISED or "alert" in text or "certificate" in text:
+        return Answer.REJECTED
+    return Answer.NOT_SERVING
+
+
+def answer_to_connack(reason_code: int) -> Answer:
+    """A CONNACK refusal: "server unavailable" or "server busy" will pass; the rest (credentials, a client id
+    or protocol refused, a connect rate exceeded) need a change or a longer wait."""
+    return Answer.NOT_SERVING if reason_code in _BUSY_CONNACK else Answer.REJECTED
 
 
 def classify(error: BaseException | str) -> str:

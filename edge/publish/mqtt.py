@@ -13,8 +13,10 @@ What this adds to paho:
   lock-step after a broker restart, never shorter than `min_delay()` (an identity conflict backs off). While
   nobody listens at the broker's port (refused, unreachable: the broker never sees such an attempt) the
   delay is capped at `reconnect_probe_s` (0.5 s, jittered), so a broker back from an outage is reached within
-  a second, not after a backoff grown to `reconnect_max_s`; a broker that answers and refuses keeps the
-  growing backoff;
+  a second, not after a backoff grown to `reconnect_max_s`. While the address accepts and does not serve
+  (closed before CONNACK, CONNACK "server unavailable/busy": a proxy in front of a broker that is down) it is
+  capped at `reconnect_not_serving_s` (2 s, drawn in [1, 2] s: at most one attempt a second). A broker that
+  rejects the attempt on its merits (credentials, TLS) keeps the growing backoff;
 - `on_lost(lasted_s, reason)` for a session the broker ended and we did not, told at the next CONNACK and
   only when that came at the first attempt: a broker that ends a session and takes the client straight back
   is what a taken-over client id looks like, a broker restart or a network loss is not (edge.publish.identity);
@@ -46,7 +48,15 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from edge.publish import connect_failure, mqtt_wire
-from edge.publish.broker_trouble import NOT_AUTHORISED, BrokerTrouble, is_tls_failure, nobody_answered
+from edge.publish.broker_trouble import (
+    NOT_AUTHORISED,
+    Answer,
+    BrokerTrouble,
+    answer_to_close,
+    answer_to_connack,
+    answer_to_error,
+    is_tls_failure,
+)
 from edge.publish.credentials import apply_credentials
 from edge.publish.settings import PublishSettings
 
@@ -89,14 +99,19 @@ def backoff_delay(attempt: int, minimum: float, maximum: float, rng: random.Rand
     return (rng or random).uniform(ceiling / 2, ceiling)
 
 
-def retry_delay(attempt: int, settings: PublishSettings, nobody_answered: bool,
+def retry_delay(attempt: int, settings: PublishSettings, answer: Answer,
                 rng: random.Random | None = None) -> float:
-    """Delay before retry number `attempt`: the backoff, capped at `reconnect_probe_s` (jittered the same way)
-    when the last attempt found nobody at the broker's port, so the reconnect after an outage is prompt."""
+    """Delay before retry number `attempt`: the backoff, capped (jittered the same way) while the last attempt
+    found nobody at the broker's port (`reconnect_probe_s`) or a broker not serving (`reconnect_not_serving_s`,
+    and then never under half of it: a refusing broker is not hammered), so the reconnect after an outage
+    comes within the cap; an attempt rejected on its merits keeps the backoff."""
     delay = backoff_delay(attempt, settings.reconnect_min_s, settings.reconnect_max_s, rng)
-    if nobody_answered:
+    if answer is Answer.NOBODY:
         probe = min(settings.reconnect_probe_s, settings.reconnect_max_s)
-        delay = min(delay, (rng or random).uniform(probe / 2, probe))
+        return min(delay, (rng or random).uniform(probe / 2, probe))
+    if answer is Answer.NOT_SERVING:
+        cap = min(settings.reconnect_not_serving_s, settings.reconnect_max_s)
+        return max(cap / 2, min(delay, (rng or random).uniform(cap / 2, cap)))
     return delay
 
 
@@ -135,7 +150,7 @@ class MqttConnection:
         self._misc_handle: asyncio.TimerHandle | None = None
         self._attempt = 0  # failed attempts since the last CONNACK
         self._previous_unsent = False  # the previous attempt failed before CONNECT left
-        self._nobody_answered = False  # the last attempt found nobody at the broker's port (retry_delay)
+        self._answer = Answer.REJECTED  # what the last failed attempt met (retry_delay); the backoff by default
         self._will_tag: object = None
         self._attempt_error: str | None = None  # paho's first error while this attempt awaits its CONNACK
         self._attempt_reported = False  # this attempt's failure is logged already
@@ -252,11 +267,11 @@ class MqttConnection:
         self._attempt_reported = False
         client.on_log = self._paho_log  # until the CONNACK: paho tells its socket errors only there
         self._connecting = True
-        self._nobody_answered = False
+        self._answer = Answer.REJECTED
         try:
             await loop.run_in_executor(None, client.reconnect)
         except Exception as exc:  # OSError, TLS and address errors alike: retried after the backoff
-            self._nobody_answered = nobody_answered(exc)
+            self._answer = answer_to_error(exc)
             tls = is_tls_failure(exc)
             self._attempt_failed("TLS handshake failed" if tls else "connect failed", exc)
             return False
@@ -470,7 +485,7 @@ class MqttConnection:
     # -- paho callbacks (all on the event loop, but for on_pre_connect: in the connect worker) ----------
 
     def _delay(self) -> float:
-        return retry_delay(self._attempt, self._settings, self._nobody_answered)
+        return retry_delay(self._attempt, self._settings, self._answer)
 
     def _paho_pre_connect(self, client: paho.Client, userdata: object) -> None:
         will = self._before_connect(self._previous_unsent)
@@ -497,6 +512,7 @@ class MqttConnection:
     def _paho_connect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                       properties: Properties | None) -> None:
         if reason.is_failure:
+            self._answer = answer_to_connack(reason.value)
             self._attempt_failed("connection refused", str(reason),
                                  NOT_AUTHORISED if reason.value in (0x04, 0x05, 0x86, 0x87, 0x8C) else None)
             return  # paho closes the socket; the supervisor retries after the backoff delay
@@ -517,6 +533,10 @@ class MqttConnection:
 
     def _paho_disconnect(self, client: paho.Client, userdata: object, flags: object, reason: ReasonCode,
                          properties: Properties | None) -> None:
+        if not self.connected and not self._attempt_reported:
+            # Closed before CONNACK: say what the attempt met now, before the supervisor (woken by the
+            # socket's close) draws the next delay; the line is logged on the loop (_loop_disconnected).
+            self._answer = answer_to_close(self._attempt_error or str(reason))
         self._defer(self._loop_disconnected, str(reason))
 
     def _paho_message(self, client: paho.Client, userdata: object, message: paho.MQTTMessage) -> None:

@@ -83,6 +83,16 @@ class CommandIgnored:
 CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
 
 
+@dataclass(frozen=True, slots=True)
+class ReleasedEvents:
+    """A batch of events a rebirth held, released after its device's DBIRTH: the samples and the DDATA that
+    carries them, from one list, so what is sent and what the replay dedupe records as sent are the same."""
+
+    device_id: str
+    samples: Sequence[Sample]
+    message: Outgoing
+
+
 class SparkplugNode:
     """Births, data, deaths and commands for one edge node and its devices."""
 
@@ -150,12 +160,12 @@ class SparkplugNode:
         out = [self.nbirth()]
         for device_id in self.unborn_devices():
             out.extend(self.dbirth(device_id))
-        out.extend(self.held_event_data())
+        out.extend(released.message for released in self.release_held_events())
         return out
 
     def nbirth(self) -> Outgoing:
         """The NBIRTH (seq 0, same bdSeq): the node is live from here, each device from its `dbirth`
-        (`births` is this, every DBIRTH and `held_event_data`, at once)."""
+        (`births` is this, every DBIRTH and `release_held_events`, at once)."""
         if self._bdseq is None:
             raise RuntimeError("births requested before session_started(bdseq)")
         self._seq = 0
@@ -182,8 +192,9 @@ class SparkplugNode:
             return []
         return [self._dbirth(device_id, dev)]
 
-    def held_event_data(self, device_id: str | None = None) -> list[Outgoing]:
-        """The DATA of the events a rebirth held (all, or one device's), after the births; taken."""
+    def release_held_events(self, device_id: str | None = None) -> list[ReleasedEvents]:
+        """The events a rebirth held (all, or one device's), taken: each batch with the DDATA built from it,
+        for the devices live now (born since the NBIRTH); the rest are dropped (their device went offline)."""
         if device_id is None:
             held, self._held_events = self._held_events, []
         else:
@@ -191,28 +202,21 @@ class SparkplugNode:
             if not held:
                 return []
             self._held_events = [pair for pair in self._held_events if pair[0] != device_id]
-        out: list[Outgoing] = []
+        released: list[ReleasedEvents] = []
         for held_id, events in held:
-            out.extend(self.device_events(held_id, events))
-        return out
-
-    def birth_samples(self, device_id: str | None = None) -> list[tuple[str, list[Sample]]]:
-        """The device values births carry (each online device's latest, or one device's): what the next
-        births() (or that device's DBIRTH) will send, beside `held_events`."""
-        if device_id is not None:
-            dev = self._devices.get(device_id)
-            return [(device_id, dev.last_samples())] if dev is not None and dev.online else []
-        return [(d, dev.last_samples()) for d, dev in self._devices.items() if dev.online]
+            dev = self._devices.get(held_id)
+            if dev is None or not self.is_live(held_id):
+                continue
+            known = self._known(held_id, dev, events)  # the device may have been declared again meanwhile
+            if known:
+                released.append(ReleasedEvents(held_id, known, self._data(dev.data_topic, dev, known)))
+        return released
 
     def birth_record(self, device_id: str) -> tuple[dict[str, Any], tuple[Sample | None, ...]] | None:
         """What the device's DBIRTH carries, compactly: its layout's slots (shared by the devices declared
         alike) and its last samples by position; None for a device that is not online."""
         dev = self._devices.get(device_id)
         return (dev.layout.slots, tuple(dev.last)) if dev is not None and dev.online else None
-
-    def held_events(self) -> list[tuple[str, list[Sample]]]:
-        """The events a rebirth held, which the next births() sends after the DBIRTHs."""
-        return [(d, list(events)) for d, events in self._held_events]
 
     def _add_birth_metrics(self, p: Payload, device_key: str, dev: DeviceTable, ts: int) -> None:
         """The birth's metrics with the protobuf runtime (the NBIRTH; DBIRTHs: edge.publish.birth_bytes)."""

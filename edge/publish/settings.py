@@ -43,5 +43,10 @@ class PublishSettings:
     # Cap of the delay while nobody listens at the broker's port (refused, unreachable): such attempts cost
     # the broker nothing, and a broker back from an outage is then reached within this (jittered) delay.
     reconnect_probe_s: float = 0.5
+    # Cap of the delay while the broker's address accepts the TCP connect but does not serve (closed or reset
+    # before CONNACK, or CONNACK "server unavailable/busy": a proxy or load balancer in front of a broker that
+    # is down, a broker still starting); each delay is drawn in [cap/2, cap], so at most one attempt a second
+    # at the default, and a broker serving again is reached within the cap.
+    reconnect_not_serving_s: float = 2.0
     rebirth_min_interval_s: float = 1.0  # rebirth requests inside this window after a rebirth coalesce
     connect_timeout_s: float = 10.0  # SUBACK wait before a session is considered broken

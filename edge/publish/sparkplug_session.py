@@ -34,7 +34,7 @@ from edge.publish.identity import IdentityGuard, bdseq_of
 from edge.publish.inbound import CommandHandlers, CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will
-from edge.publish.node import CommandIgnored, DeviceCommand, Outgoing, RebirthRequested, SparkplugNode
+from edge.publish.node import CommandIgnored, DeviceCommand, Outgoing, RebirthRequested, ReleasedEvents, SparkplugNode
 from edge.publish.primary_host import PrimaryHost, StateVerdict
 from edge.publish.replay import Replayer
 from edge.publish.replay_dedupe import DeliveredValues
@@ -310,19 +310,14 @@ class SparkplugSession:
         conn = self.link.conn
         if self.node_metrics_source is not None:
             self.node.set_node_metrics(self.node_metrics_source())
-        events = self.node.held_events()
         nbirth = self.node.nbirth()
         self.guard.sent_birth(nbirth.payload)  # its echo on our subscription is ours
         if not self.link.send(conn, (nbirth,)):
             return
         assert conn is not None
-        held: dict[str, list[Sample]] = {}
-        for device_id, samples in events:
-            held.setdefault(device_id, []).extend(samples)
-        self._tasks.spawn(self._dbirths(conn, self.link.session, self.node.generation, held))
+        self._tasks.spawn(self._dbirths(conn, self.link.session, self.node.generation))
 
-    async def _dbirths(self, conn: MqttConnection, session: int, generation: int,
-                       events: dict[str, list[Sample]]) -> None:
+    async def _dbirths(self, conn: MqttConnection, session: int, generation: int) -> None:
         """Each online device's DBIRTH (then the events a rebirth held for it), BIRTH_SLICE_S of them a loop
         turn: 1,000 DBIRTHs built at once held the loop ~0.9 s (protobuf) and ~7 MB of payloads at 1,000 machines.
         What each carries is recorded so the replay does not repeat it. A device's live DATA is held
@@ -347,16 +342,18 @@ class SparkplugSession:
             births = node.dbirth(device_id)
             if not births:
                 continue  # went offline, or born meanwhile (device_online)
-            births.extend(node.held_event_data(device_id))
+            released = node.release_held_events(device_id)
+            births.extend(r.message for r in released)
             if not link.send(conn, births):
                 return
             self._record_birth(device_id)
-            held = events.pop(device_id, None)
-            if held:
-                self.delivered.record(device_id, held)
+            self._record_released(released)
         if not current():
             return
-        link.send(conn, node.held_event_data())  # events of devices gone offline meanwhile: none go out
+        # The rest: events of devices born meanwhile (device_online) go out, those of devices gone offline not.
+        released = node.release_held_events()
+        if link.send(conn, [r.message for r in released]):
+            self._record_released(released)
         log.info("births sent devices=%d seconds=%.2f", len(pending), time.monotonic() - started)
         self.replay.kick()
 
@@ -364,6 +361,11 @@ class SparkplugSession:
         record = self.node.birth_record(device_id)
         if record is not None:
             self.delivered.record_birth_slots(device_id, *record)
+
+    def _record_released(self, released: Sequence[ReleasedEvents]) -> None:
+        """The held events that went out after the births: the replay does not send them again."""
+        for r in released:
+            self.delivered.record(r.device_id, r.samples)
 
     def cancel_rebirth(self) -> None:
         if self._rebirth_handle is not None:

@@ -6,6 +6,10 @@ as a broker that is down does, so the subscriber sees every message of the daemo
 until the daemon has failed enough attempts for the old backoff (doubling to `reconnect_max_s`, 30 s here)
 to be at 15-30 s: the data must resume well inside that. How fast it resumes is the benchmark's
 (`python -m bench outage`); here only that it is not a backoff late, and in Sparkplug's order.
+
+The same for a broker address that accepts the TCP connect and closes it before CONNACK (a proxy or load
+balancer in front of a broker that is down, the soak's relay): the delay is capped at
+`reconnect_not_serving_s` while it lasts, not at the backoff's `reconnect_max_s`, and never under half of it.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import pytest
 
 from edge.config import parse_config
 from edge.publish.forwarding import ForwardingPolicy
+from edge.publish.mqtt import MqttConnection
+from edge.publish.settings import PublishSettings
 from edge.service.daemon import Daemon
 from edge.sim.fleet import Fleet
 from tests.helpers import Mosquitto, async_wait_for
@@ -93,3 +99,32 @@ async def test_data_resumes_promptly_after_an_outage_births_first_then_the_backl
         device = [m for m in after if m.topic.endswith(f"/gw/m{i + 1}")]
         assert device[0].kind == "DBIRTH", [m.topic for m in device[:3]]
         assert any(m.kind == "DDATA" and historical(m) for m in device), f"m{i + 1}: no backlog replayed"
+
+
+async def test_a_broker_that_accepts_and_closes_is_retried_at_most_once_a_second_and_reached_within_the_cap(
+        relay: TcpRelay) -> None:
+    settings = PublishSettings(host=relay.host, port=relay.port, keepalive=5, reconnect_min_s=0.5,
+                               reconnect_max_s=BACKOFF_MAX_S, reconnect_not_serving_s=2.0)
+    cap = settings.reconnect_not_serving_s
+    relay.accepting = False  # the TCP connect succeeds, then the relay closes it before any CONNACK
+    conn = MqttConnection(settings, "not-serving", before_connect=lambda unsent: None,
+                          on_connected=lambda tag: None, on_disconnected=lambda: None, on_message=lambda msg: None)
+    loop = asyncio.get_running_loop()
+    started = loop.time()
+    conn.start()
+    try:
+        # The old backoff after these: 0.5 s * 2**6 capped at 30 s, drawn in [15, 30] s.
+        await async_wait_for(lambda: conn.trouble.failed_attempts >= FAILED_ATTEMPTS - 1,
+                             timeout=(FAILED_ATTEMPTS - 1) * cap + 10,
+                             message=f"{FAILED_ATTEMPTS - 1} attempts turned away")
+        assert not conn.connected
+        # Not hammered: each retry waited at least half the cap (1 s here).
+        assert loop.time() - started >= (FAILED_ATTEMPTS - 2) * cap / 2 - 0.05
+        reopened = loop.time()
+        relay.accepting = True
+        await async_wait_for(lambda: conn.connected, timeout=cap + 1.0, interval=0.02,
+                             message=f"the CONNACK within {cap} s (+1 s) of the broker serving again")
+        assert loop.time() - reopened <= cap + 1.0
+        assert relay.accepted == 1
+    finally:
+        await conn.stop()

@@ -88,6 +88,30 @@ def test_rebirth_hold_stops_data_and_replays_held_events_after_births() -> None:
     assert pl.decode(out[2].payload).metrics[0].timestamp == 40  # the event's own time
 
 
+def test_held_events_are_released_after_their_dbirth_with_the_samples_their_ddata_carries() -> None:
+    n = node()
+    event_specs = [*SPECS, MetricSpec("Alarm/Event", MetricType.STRING)]
+    n.device_online("m1", event_specs, [])
+    n.device_online("m2", event_specs, [])
+    n.births()
+    assert n.request_rebirth()
+    raised = [Sample("Alarm/Event", "raised", MetricType.STRING, 40),
+              Sample("Alarm/Event", "cleared", MetricType.STRING, 45)]
+    assert n.device_events("m1", raised) == []
+    assert n.device_events("m2", [Sample("Alarm/Event", "other", MetricType.STRING, 41)]) == []
+    n.nbirth()
+    n.dbirth("m1")
+    (released,) = n.release_held_events("m1")
+    assert (released.device_id, list(released.samples)) == ("m1", raised)
+    ddata = pl.decode(released.message.payload)
+    assert released.message.topic == "spBv1.0/G/DDATA/E/m1"
+    assert [(m.timestamp, m.string_value) for m in ddata.metrics] == [(40, "raised"), (45, "cleared")]
+    n.device_offline("m2")
+    assert n.release_held_events() == []  # m2 went offline before its DBIRTH: its events are not sent
+    n.dbirth("m1")
+    assert n.release_held_events("m1") == []  # taken once
+
+
 def test_aliases_unique_across_devices_and_stable_across_restarts(tmp_path: Path) -> None:
     n = node(tmp_path)
     n.set_node_metrics([Sample("Gateway/Version", "1", MetricType.STRING, 1)])
