@@ -79,8 +79,10 @@ def test_an_unknown_metric_among_known_ones_keeps_the_latest_known_values() -> N
     n = node()
     n.device_online("m1", SPECS, [])
     n.births()
-    out = n.device_data("m1", [Sample("Macro/500", 1.0, MetricType.DOUBLE, 1), Sample("Nope", 1, MetricType.INT16, 1),
-                               Sample("Macro/500", 2.0, MetricType.DOUBLE, 2), Sample("Status/Run", 3, MetricType.INT16, 2)])
+    out = n.device_data("m1", [Sample("Macro/500", 1.0, MetricType.DOUBLE, 1),
+                               Sample("Nope", 1, MetricType.INT16, 1),
+                               Sample("Macro/500", 2.0, MetricType.DOUBLE, 2),
+                               Sample("Status/Run", 3, MetricType.INT16, 2)])
     assert len(pl.decode(out[0].payload).metrics) == 3 and n.unknown_metrics == 1
     dbirth = next(m for m in n.births() if "/DBIRTH/" in m.topic)
     values = {m.name: (m.double_value, m.int_value) for m in pl.decode(dbirth.payload).metrics}
