@@ -44,7 +44,7 @@ from edge.focas.frame import Frame
 from edge.focas.function_entry import Context
 from edge.publish import mqtt_wire
 from edge.publish.aliases import AliasMap
-from edge.publish.forwarding import HeldBatch, Outbox
+from edge.publish.forwarding import Outbox
 from edge.publish.node import SparkplugNode
 from edge.service.gc_tuning import tune_collector
 from edge.service.settings import machine_settings
@@ -182,7 +182,7 @@ async def _replay(recording: dict[str, Any], machines: int, rounds: int, gc_mode
                 prefix = topics.prefix(message.topic, message.retain)
                 assert prefix is not None
                 sent.append(mqtt_wire.publish_packet(prefix, message.payload))
-            outbox.record(HeldBatch(device_id, "data", samples))
+            outbox.add(device_id, "data", samples)
             if digest:
                 for s in samples:
                     published.update(repr((device_id, s.name, s.value, s.type.value, s.timestamp_ms,

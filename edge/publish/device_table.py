@@ -81,7 +81,8 @@ class DeviceTable:
         return self.alias_data[ends[position]:ends[position + 1]]
 
     def record(self, samples: Sequence[Sample]) -> None:
-        """Keep these (declared) samples as the metrics' last values; a later one of a name wins."""
+        """Keep these (declared) samples as the metrics' last values; a later one of a name wins. KeyError at
+        the first undeclared name (the ones before it are kept)."""
         slots = self.layout.slots
         last = self.last
         for sample in samples:  # a plain loop: 0.33 us for a tick's 9 values, the chain of maps took 1.5

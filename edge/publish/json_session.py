@@ -15,7 +15,7 @@ from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
-from edge.publish.forwarding import ForwardingPolicy, HeldBatch
+from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import SpoolWriter
 from edge.publish.identity import IdentityGuard
 from edge.publish.inbound import CommandHandlers, CommandSource
@@ -104,7 +104,7 @@ class JsonSession:
         link = self.link
         if link.live:
             topics = self.topics
-            link.send_live([topics.state(device_id, s) for s in samples], HeldBatch(device_id, "data", samples))
+            link.send_live([topics.state(device_id, s) for s in samples], device_id, "data", samples)
         else:
             link.hold(device_id, "data", samples)
 
@@ -112,7 +112,7 @@ class JsonSession:
         link = self.link
         if link.live:
             topics = self.topics
-            link.send_live([topics.event(device_id, s) for s in events], HeldBatch(device_id, "events", events))
+            link.send_live([topics.event(device_id, s) for s in events], device_id, "events", events)
         else:
             link.hold(device_id, "events", events)
 

@@ -84,16 +84,17 @@ class DeliveryLink:
                 ok = False
         return ok
 
-    def send_live(self, messages: Sequence[Outgoing], batch: HeldBatch) -> None:
-        """Publish live messages; remember the batch until a barrier confirms it, or spool it on failure."""
+    def send_live(self, messages: Sequence[Outgoing], device_id: str, kind: str, samples: Sequence[Sample]) -> None:
+        """Publish live messages; remember their batch (one device's samples of one kind) until a barrier
+        confirms it, or spool it on failure."""
         if not messages:
             return
         conn = self.conn
         if conn is None:
-            self.hold(batch.device_id, batch.kind, batch.samples)
+            self.hold(device_id, kind, samples)
             return
         sent = self.send(conn, messages)
-        self.outbox.record(batch)
+        self.outbox.add(device_id, kind, samples)
         if not sent:
             self.suspect_dead(conn, "publish refused by the MQTT client")
 

@@ -53,6 +53,28 @@ class Outgoing:
     retain: bool = False
 
 
+def _data_message_builder() -> Callable[[str, bytes], Outgoing]:
+    """`data_message(topic, payload)`: the `Outgoing(topic, payload)` of a DATA message (QoS 0, not retained),
+    built by setting its slots: a frozen dataclass's __init__ goes through object.__setattr__ (0.5 us), and
+    every tick of every machine with a change publishes one (0.28 us this way)."""
+    new = object.__new__
+    set_topic, set_payload, set_qos, set_retain = (getattr(Outgoing, name).__set__
+                                                   for name in ("topic", "payload", "qos", "retain"))
+
+    def data_message(topic: str, payload: bytes) -> Outgoing:
+        message = new(Outgoing)
+        set_topic(message, topic)
+        set_payload(message, payload)
+        set_qos(message, 0)
+        set_retain(message, False)
+        return message
+
+    return data_message
+
+
+data_message = _data_message_builder()
+
+
 @dataclass(frozen=True, slots=True)
 class RebirthRequested:
     """An NCMD `Node Control/Rebirth` = true."""
@@ -332,8 +354,12 @@ class SparkplugNode:
         if dev is None:
             self._unknown(device_id, "<device>")
             return []
-        known = self._known(device_id, dev, samples)
-        dev.record(known)
+        try:  # the common tick: every name declared, so no separate check of them (_known) first
+            dev.record(samples)
+            known = samples
+        except KeyError:  # an undeclared name: the declared ones recorded (again, in order), the rest counted
+            known = self._known(device_id, dev, samples)
+            dev.record(known)
         if not (self.live and dev.online and dev.born_in == self.generation) or not known:
             return []
         return [self._data(dev.data_topic, dev, known)]
@@ -485,7 +511,7 @@ class SparkplugNode:
                 continue
             append(self._metric(s, alias + stamp, value_field, mtype, not_good))
         append(tail)
-        return Outgoing(topic, b"".join(parts))
+        return data_message(topic, b"".join(parts))
 
     def _historical(self, dev: DeviceTable, rows: Sequence[Sequence[Any]]) -> Outgoing:
         """One DATA message of replayed rows, every metric is_historical, in chronological order.

@@ -28,7 +28,7 @@ from typing import Any
 
 from edge.publish.aliases import AliasMap
 from edge.publish.bdseq import BdSeqCounter
-from edge.publish.forwarding import ForwardingPolicy, HeldBatch
+from edge.publish.forwarding import ForwardingPolicy
 from edge.publish.holding import SpoolWriter
 from edge.publish.identity import IdentityGuard, bdseq_of
 from edge.publish.inbound import CommandHandlers, CommandSource, DeviceCommands, RefusedMetric
@@ -135,14 +135,14 @@ class SparkplugSession:
     def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
         node = self.node
         if self._live(device_id):
-            self.link.send_live(node.device_data(device_id, samples), HeldBatch(device_id, "data", samples))
+            self.link.send_live(node.device_data(device_id, samples), device_id, "data", samples)
         else:
             node.device_data(device_id, samples)  # births will carry the latest values
             self.link.hold(device_id, "data", samples)
 
     def device_events(self, device_id: str, events: Sequence[Sample]) -> None:
         if self._live(device_id):
-            self.link.send_live(self.node.device_events(device_id, events), HeldBatch(device_id, "events", events))
+            self.link.send_live(self.node.device_events(device_id, events), device_id, "events", events)
         else:
             self.link.hold(device_id, "events", events)
 

@@ -75,6 +75,20 @@ def test_unknown_metric_is_counted_not_published() -> None:
     assert len(pl.decode(out[0].payload).metrics) == 1 and n.unknown_metrics == 1
 
 
+def test_an_unknown_metric_among_known_ones_keeps_the_latest_known_values() -> None:
+    n = node()
+    n.device_online("m1", SPECS, [])
+    n.births()
+    out = n.device_data("m1", [Sample("Macro/500", 1.0, MetricType.DOUBLE, 1),
+                               Sample("Nope", 1, MetricType.INT16, 1),
+                               Sample("Macro/500", 2.0, MetricType.DOUBLE, 2),
+                               Sample("Status/Run", 3, MetricType.INT16, 2)])
+    assert len(pl.decode(out[0].payload).metrics) == 3 and n.unknown_metrics == 1
+    dbirth = next(m for m in n.births() if "/DBIRTH/" in m.topic)
+    values = {m.name: (m.double_value, m.int_value) for m in pl.decode(dbirth.payload).metrics}
+    assert values["Macro/500"][0] == 2.0 and values["Status/Run"][1] == 3
+
+
 def test_rebirth_hold_stops_data_and_replays_held_events_after_births() -> None:
     n = node()
     n.device_online("m1", [*SPECS, MetricSpec("Alarm/Event", MetricType.STRING)], [])
