@@ -20,12 +20,16 @@ from edge.publish import ddata as dd
 from edge.publish import payload as pl
 from edge.publish.aliases import NODE, AliasMap
 from edge.publish.device_table import DeviceTable, MetricLayout, layout_of
+from edge.publish.node_commands import (
+    NAMESPACE,
+    CommandEvent,
+    CommandReader,
+)
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.samples import MetricSpec, MetricType, Quality, Sample
 
 log = logging.getLogger(__name__)
 
-NAMESPACE = "spBv1.0"
 _FORBIDDEN_ID_CHARS = frozenset("+/#")
 _by_timestamp = attrgetter("timestamp_ms")
 _row_name = itemgetter(0)
@@ -76,36 +80,6 @@ data_message = _data_message_builder()
 
 
 @dataclass(frozen=True, slots=True)
-class RebirthRequested:
-    """An NCMD `Node Control/Rebirth` = true."""
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceCommand:
-    """A DCMD metric resolved against the device's DBIRTH and decoded to its declared type."""
-
-    device_id: str
-    metric_name: str
-    value: object
-
-
-@dataclass(frozen=True, slots=True)
-class CommandIgnored:
-    """A command metric that cannot be acted on; `reason` says why (for the log and counters)."""
-
-    reason: str
-    unknown: bool  # True: name/alias/device not known; False: known but rejected (read-only, bad value)
-    # A refused DCMD metric, for the write audit: the device, the metric (name, or alias=N) and the write
-    # reply code (edge.command.errors) that says why; None for anything that is not a DCMD metric.
-    device_id: str | None = None
-    metric: str | None = None
-    code: str | None = None
-
-
-CommandEvent = RebirthRequested | DeviceCommand | CommandIgnored
-
-
-@dataclass(frozen=True, slots=True)
 class ReleasedEvents:
     """A batch of events a rebirth held, released after its device's DBIRTH: the samples and the DDATA that
     carries them, from one list, so what is sent and what the replay dedupe records as sent are the same."""
@@ -144,6 +118,7 @@ class SparkplugNode:
         self.nbirth_topic = f"{base}/NBIRTH/{edge_node_id}"
         self._ndata_topic = f"{base}/NDATA/{edge_node_id}"
         self._device_topic = f"{base}/{{kind}}/{edge_node_id}/{{device}}"
+        self._commands = CommandReader(group_id, edge_node_id, aliases, lambda: self._node, self._devices)
 
     # -- session -------------------------------------------------------------------------------------
 
@@ -579,75 +554,7 @@ class SparkplugNode:
 
     def parse_command(self, topic: str, data: bytes) -> list[CommandEvent]:
         """NCMD/DCMD -> events; anything unusable becomes CommandIgnored with the reason."""
-        parts = topic.split("/")
-        mine = len(parts) >= 4 and parts[0] == NAMESPACE and parts[1] == self.group_id
-        if not mine or parts[3] != self.edge_node_id:
-            return [CommandIgnored(f"topic {topic!r} is not a command for this node", unknown=True)]
-        try:
-            p = pl.decode(data)
-        except ValueError as exc:
-            device = parts[4] if parts[2] == "DCMD" and len(parts) == 5 else None
-            return [CommandIgnored(f"{topic}: {exc}", unknown=False, device_id=device, code="malformed")]
-        if parts[2] == "NCMD" and len(parts) == 4:
-            return [self._node_command(m) for m in p.metrics]
-        if parts[2] == "DCMD" and len(parts) == 5:
-            if not p.metrics:  # still a command someone sent: refused and audited, not dropped unseen
-                return [CommandIgnored(f"{topic}: a DCMD without metrics", unknown=False, device_id=parts[4],
-                                       code="malformed")]
-            return [self._device_command(parts[4], m) for m in p.metrics]
-        expected = "expected NCMD/<edge> or DCMD/<edge>/<device>"
-        return [CommandIgnored(f"topic {topic!r}: {expected}", unknown=True)]
-
-    def _resolve(self, device_key: str, m: Payload.Metric) -> str | None:
-        if m.HasField("name") and m.name:
-            return m.name
-        if m.HasField("alias"):
-            found = self._aliases.resolve(m.alias)
-            if found is not None and found[0] == device_key:
-                return found[1]
-        return None
-
-    def _node_command(self, m: Payload.Metric) -> CommandEvent:
-        name = self._resolve(NODE, m)
-        if name == pl.REBIRTH_METRIC:
-            try:
-                value = pl.get_value(m, MetricType.BOOLEAN)
-            except ValueError as exc:
-                return CommandIgnored(f"NCMD {name}: {exc}", unknown=False)
-            if value:
-                return RebirthRequested()
-            return CommandIgnored(f"NCMD {name}: value false, nothing to do", unknown=False)
-        if name is None:
-            return CommandIgnored(f"NCMD metric {_describe(m)}: expected a known name or alias", unknown=True)
-        known = name in self._node.layout.specs
-        return CommandIgnored(f"NCMD {name}: node metric is not writable", unknown=not known)
-
-    def _device_command(self, device_id: str, m: Payload.Metric) -> CommandEvent:
-        dev = self._devices.get(device_id)
-        described = m.name if m.HasField("name") and m.name else _describe(m)
-        if dev is None:
-            return CommandIgnored(f"DCMD for unknown device {device_id!r}", unknown=True, device_id=device_id,
-                                  metric=described, code="unknown_machine")
-        name = self._resolve(device_id, m)
-        spec = dev.layout.specs.get(name) if name is not None else None
-        if name is None or spec is None:
-            return CommandIgnored(f"DCMD {device_id}: metric {_describe(m)} not in its DBIRTH", unknown=True,
-                                  device_id=device_id, metric=described, code="unknown_metric")
-        if not spec.writable:
-            return CommandIgnored(f"DCMD {device_id}: metric {name!r} is read-only", unknown=False,
-                                  device_id=device_id, metric=name, code="invalid_target")
-        try:
-            value = pl.get_value(m, spec.type)
-        except ValueError as exc:
-            return CommandIgnored(f"DCMD {device_id} {name}: {exc}", unknown=False, device_id=device_id,
-                                  metric=name, code="wrong_type")
-        return DeviceCommand(device_id, name, value)
-
-
-def _describe(m: Payload.Metric) -> str:
-    if m.HasField("name"):
-        return f"name={m.name!r}"
-    return f"alias={m.alias}" if m.HasField("alias") else "without name or alias"
+        return self._commands.parse(topic, data)
 
 
 def check_metric_name(name: str) -> str:

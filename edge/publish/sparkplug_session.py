@@ -34,7 +34,8 @@ from edge.publish.identity import IdentityGuard, bdseq_of
 from edge.publish.inbound import CommandHandlers, CommandSource, DeviceCommands, RefusedMetric
 from edge.publish.link import DeliveryLink
 from edge.publish.mqtt import InboundMessage, MqttConnection, MqttUnavailable, Will
-from edge.publish.node import CommandIgnored, DeviceCommand, Outgoing, RebirthRequested, ReleasedEvents, SparkplugNode
+from edge.publish.node import Outgoing, ReleasedEvents, SparkplugNode
+from edge.publish.node_commands import CommandIgnored, DeviceCommand, RebirthRequested
 from edge.publish.primary_host import PrimaryHost, StateVerdict
 from edge.publish.replay import Replayer
 from edge.publish.replay_dedupe import DeliveredValues

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from edge.publish import payload as pl
 from edge.publish.aliases import AliasMap
 from edge.publish.bdseq import BdSeqCounter
-from edge.publish.node import CommandIgnored, DeviceCommand, Outgoing, RebirthRequested, SparkplugNode
+from edge.publish.node import Outgoing, SparkplugNode
+from edge.publish.node_commands import CommandIgnored, DeviceCommand, RebirthRequested
 from edge.publish.primary_host import PrimaryHost, StateVerdict
 from edge.publish.sparkplug_b_pb2 import DataType, Payload
 from edge.publish.state_store import StateStore
