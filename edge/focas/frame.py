@@ -474,7 +474,8 @@ class FrameDecoder:
     """
 
     def __init__(self, versions: Iterable[int] = ACCEPTED_VERSIONS, max_body: int = MAX_BODY_LENGTH) -> None:
-        self._versions = frozenset(versions)
+        # The default set is shared, not copied: a frozenset is ~0.2 kB a session.
+        self._versions = versions if isinstance(versions, frozenset) else frozenset(versions)
         self._max_body = max_body
         self._buffer = bytearray()
         self._error: ProtocolError | None = None
