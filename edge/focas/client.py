@@ -47,7 +47,15 @@ from edge.focas.frame import (
 )
 from edge.focas.function_entry import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, shared_plan_item
+from edge.focas.native import (
+    SUPPORTED_ITEMS,
+    ItemPlan,
+    clock_value,
+    combine_clock,
+    first_value,
+    item_value,
+    shared_plan_item,
+)
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -320,7 +328,10 @@ class FocasClient(CncSession):
             for entry in todo:
                 plan, start, call = plans[entry], starts[entry], single[entry]
                 if call is None:
-                    value = item_value(plan, _answered(answers, splitter, body, start, len(plan.calls)), 0, context)
+                    got = _answered(answers, splitter, body, start, len(plan.calls))
+                    value = clock_value(*got) if plan.combine is combine_clock else None  # one decode, not three
+                    if value is None:
+                        value = item_value(plan, got, 0, context)
                 else:  # the common item, one call whose value is the item's: without item_value's loop
                     answer = answers[start] if answers else None
                     if answer is None:  # not moved, decoded again (its value was an error)
