@@ -325,13 +325,13 @@ class FocasClient(CncSession):
                 continue
             layout = pdu.layout
             starts, plans, single = layout.starts, layout.plans, layout.single
+            value: ItemResult
             for entry in todo:
                 plan, start, call = plans[entry], starts[entry], single[entry]
                 if call is None:
                     got = _answered(answers, splitter, body, start, len(plan.calls))
-                    value = clock_value(*got) if plan.combine is combine_clock else None  # one decode, not three
-                    if value is None:
-                        value = item_value(plan, got, 0, context)
+                    clock = clock_value(*got) if plan.combine is combine_clock else None  # one decode, not three
+                    value = item_value(plan, got, 0, context) if clock is None else clock
                 else:  # the common item, one call whose value is the item's: without item_value's loop
                     answer = answers[start] if answers else None
                     if answer is None:  # not moved, decoded again (its value was an error)
