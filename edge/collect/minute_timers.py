@@ -16,7 +16,6 @@ import asyncio
 import heapq
 import logging
 import time
-import weakref
 from collections.abc import Awaitable, Callable, Sequence
 
 from edge.collect.plant_state import SAVE_EVERY_MINUTES, PlantState
@@ -112,12 +111,14 @@ class MinuteTimers:
 
     @classmethod
     def for_loop(cls, loop: asyncio.AbstractEventLoop | None = None) -> MinuteTimers:
-        """The one set of timers of this event loop (made when first asked)."""
+        """The timers of this event loop: one set, made when first asked. Only the last loop's set is kept here
+        (a daemon has one loop; a test suite makes many, and a set refers to its loop); a machine's minutes stay
+        on the set they started on whatever is asked later."""
+        global _CURRENT
         loop = loop or asyncio.get_running_loop()
-        timers = _BY_LOOP.get(loop)
-        if timers is None:
-            timers = _BY_LOOP[loop] = cls(loop)
-        return timers
+        if _CURRENT is None or _CURRENT._loop is not loop:
+            _CURRENT = cls(loop)
+        return _CURRENT
 
 
-_BY_LOOP: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, MinuteTimers] = weakref.WeakKeyDictionary()
+_CURRENT: MinuteTimers | None = None
