@@ -99,7 +99,7 @@ async def _shape(shape: str, ports: list[int], warmup_s: float, duration_s: floa
             due += PERIOD_S
             while not frames:
                 await stream.arrival()
-            frames.popleft()
+            frames.pop(0)
             cycles += 1
 
     def shape_b(stream: FrameStream, data: bytes) -> None:
@@ -110,7 +110,7 @@ async def _shape(shape: str, ports: list[int], warmup_s: float, duration_s: floa
             nonlocal cycles, due
             frames.extend(decoder.feed(chunk))
             if frames:
-                frames.popleft()
+                frames.pop(0)
                 cycles += 1
                 due += PERIOD_S
                 slots.at(due, _send, pair)

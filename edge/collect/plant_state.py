@@ -17,7 +17,6 @@ import asyncio
 import logging
 import time
 import zlib
-from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo
@@ -97,25 +96,11 @@ class PlantState:
         spec = ut.COUNTERS[state]
         return [new_sample(spec.name, round(self.counter.seconds[state], 3), spec.type, at_ms, Quality.GOOD)]
 
-    # ---- the minute task and saving --------------------------------------------------------------------
-    async def run_minutes(self, now_ms: Callable[[], int], publish: Callable[[Sequence[Sample]], Awaitable[None]],
-                          wall: Callable[[], float] = time.time) -> None:
-        """Once a minute (and at local midnight): count, publish; every SAVE_EVERY_MINUTES, save. Runs until
-        cancelled."""
-        minutes = 0
-        while True:
-            await asyncio.sleep(self.next_delay_s(wall(), now_ms()))
-            samples = self.minute(now_ms())
-            await publish(samples)
-            minutes += 1
-            if minutes % SAVE_EVERY_MINUTES:
-                continue
-            sequence, data = self._snapshot()
-            try:
-                await asyncio.to_thread(self.store.save, sequence, data)
-            except OSError as exc:
-                log.warning("utilisation not saved machine=%s file=%s error=%s", self.device_id,
-                            self.store.path, exc)
+    # ---- the minute and saving (edge.collect.minute_timers calls them) ---------------------------------
+    async def save_in_thread(self) -> None:
+        """Save a snapshot of the counters, the file written off the event loop (raises OSError)."""
+        sequence, data = self._snapshot()
+        await asyncio.to_thread(self.store.save, sequence, data)
 
     def next_delay_s(self, wall_s: float, now_ms: int) -> float:
         """Seconds to this device's next minute mark or the next local midnight, whichever is first."""

@@ -13,7 +13,6 @@ import asyncio
 import contextlib
 import logging
 import struct
-from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime
@@ -48,7 +47,15 @@ from edge.focas.frame import (
 )
 from edge.focas.function_entry import Context, Function, PayloadDecoder
 from edge.focas.model import Capabilities, SysInfo
-from edge.focas.native import SUPPORTED_ITEMS, ItemPlan, first_value, item_value, shared_plan_item
+from edge.focas.native import (
+    SUPPORTED_ITEMS,
+    ItemPlan,
+    clock_value,
+    combine_clock,
+    first_value,
+    item_value,
+    shared_plan_item,
+)
 from edge.focas.session import CncSession, ItemResult
 from edge.focas.values import encode_scaled
 
@@ -71,7 +78,8 @@ class FrameStream(asyncio.Protocol):
         self.peer = peer
         self.transport: asyncio.Transport | None = None
         self._decoder = FrameDecoder()
-        self._frames: deque[Frame] = deque()
+        # A list, not a deque: it holds one answer at a time (an empty deque is ~0.6 kB a session).
+        self._frames: list[Frame] = []
         self.frames = self._frames  # complete frames not taken yet (the request path pops them itself)
         self._waiter: asyncio.Future[None] | None = None
         self._error: ProtocolError | None = None
@@ -107,7 +115,7 @@ class FrameStream(asyncio.Protocol):
     async def next_frame(self) -> Frame:
         while not self._frames:
             await self.arrival()
-        return self._frames.popleft()
+        return self._frames.pop(0)
 
     def arrival(self) -> asyncio.Future[None]:
         """A future done when the next bytes arrive or the connection ends (awaited directly by the request
@@ -317,10 +325,13 @@ class FocasClient(CncSession):
                 continue
             layout = pdu.layout
             starts, plans, single = layout.starts, layout.plans, layout.single
+            value: ItemResult
             for entry in todo:
                 plan, start, call = plans[entry], starts[entry], single[entry]
                 if call is None:
-                    value = item_value(plan, _answered(answers, splitter, body, start, len(plan.calls)), 0, context)
+                    got = _answered(answers, splitter, body, start, len(plan.calls))
+                    clock = clock_value(*got) if plan.combine is combine_clock else None  # one decode, not three
+                    value = item_value(plan, got, 0, context) if clock is None else clock
                 else:  # the common item, one call whose value is the item's: without item_value's loop
                     answer = answers[start] if answers else None
                     if answer is None:  # not moved, decoded again (its value was an error)
@@ -466,7 +477,7 @@ class FocasClient(CncSession):
         frames = stream.frames
         while not frames:  # stream.next_frame, inline: one coroutine less on every request's await chain
             await stream.arrival()
-        frame = frames.popleft()
+        frame = frames.pop(0)
         if frame.type != expected:
             raise ProtocolError(f"{self.describe()}: {what}: expected a 0x{int(expected):04x} frame, "
                                 f"got type 0x{frame.type:04x} ({len(frame.body)} body bytes)")

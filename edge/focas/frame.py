@@ -314,9 +314,10 @@ class AnswerSplitter:
     size and count, each slot's last answer (in the session's AnswerMemo, whichever PDU brought it) is
     compared with the bytes at its offset, in C (the body cut into its pieces by one struct unpack); only a
     subpacket that differs is parsed (and checked) again. A changed piece whose length moved, or a body of
-    another size, is split from scratch. `split` says which subpackets moved (None: all of them) and gives
-    their answers; `answer` parses any other subpacket of the same body when a caller needs it (an item with
-    several calls, an error retried). Per PDU only numbers are kept (offsets, lengths and the struct that
+    another size, is split from scratch. `split` says which subpackets moved (by their bytes, after a split
+    from scratch too: a string that changed length moves the offsets, not the other answers; None the first
+    time) and gives their answers; `answer` parses any other subpacket of the same body when a caller needs it
+    (an item with several calls, an error retried). Per PDU only numbers are kept (offsets, lengths and the struct that
     cuts the body, shared between equal layouts), no answer.
     """
 
@@ -339,14 +340,15 @@ class AnswerSplitter:
         self._generation = -1
 
     def split(self, body: bytes) -> tuple[Sequence[Answer | None], list[int] | None]:
-        """Which subpackets moved since their last answers (None: all of them, after a split from scratch) and,
-        per subpacket, its answer where it was parsed (every one when all moved; None where it did not move)."""
+        """Which subpackets moved since their last answers (None: this splitter's first answer, so every item
+        of the PDU is new to its caller, those that ask nothing too) and, per subpacket, its answer where it was
+        parsed (every one after a split from scratch; None where it did not move)."""
         memo = self._memo
         if len(body) == self._size and body.startswith(self._head):
             last = self._get(memo.pieces)
             if self._generation != memo.generation:  # a slot's length changed: do the lengths still fit?
                 if tuple(map(len, last)) != self._lengths:
-                    return self._split_anew(body), None
+                    return self._split_anew(body)
                 self._generation = memo.generation
             # The body cut into its pieces at the known offsets (one unpack), each compared with its last piece:
             # which subpackets are not what they were.
@@ -360,7 +362,7 @@ class AnswerSplitter:
             for index in moved:
                 answer, length = _one_answer(body, offsets[index], index, echoes[index])
                 if length != lengths[index]:
-                    break  # the layout moved: split from scratch
+                    break  # the layout moved: split from scratch (the memo is not touched yet)
                 parsed.append(answer)
             else:
                 answers: list[Answer | None] = [None] * len(offsets)
@@ -369,13 +371,16 @@ class AnswerSplitter:
                     answers[index] = answer
                     pieces[slots[index]] = new[index]
                 return answers, moved
-        return self._split_anew(body), None
+        return self._split_anew(body)
 
     def answer(self, body: bytes, index: int) -> Answer:
         """Subpacket `index` of the body `split` was just given."""
         return _one_answer(body, self._offsets[index], index, self._echoes[index])[0]
 
-    def _split_anew(self, body: bytes) -> list[Answer]:
+    def _split_anew(self, body: bytes) -> tuple[list[Answer], list[int] | None]:
+        """Every subpacket parsed; moved are those whose bytes differ from their slot's last answer (a string
+        that changed length moves the layout, not the other answers: they need no decoding again)."""
+        first = not self._offsets
         self._size = -1  # until this answer is known good
         answers = split_response(body, self._echoes)
         offsets, lengths, offset = [], [], 2
@@ -386,16 +391,20 @@ class AnswerSplitter:
         memo = self._memo
         pieces = memo.pieces
         moved_layout = False
-        for slot, start, length in zip(self._slots, offsets, lengths, strict=True):
+        moved = []
+        for index, slot, start, length in zip(self._indices, self._slots, offsets, lengths, strict=True):
             moved_layout = moved_layout or len(pieces[slot]) != length
-            pieces[slot] = body[start : start + length]
+            piece = body[start : start + length]
+            if piece != pieces[slot]:
+                moved.append(index)
+                pieces[slot] = piece
         if moved_layout:
             memo.generation += 1
         self._generation = memo.generation
         self._offsets, self._lengths = intern_ints(tuple(offsets)), intern_ints(tuple(lengths))
         self._cut = _body_cut(self._lengths)
         self._size = len(body)
-        return answers
+        return answers, None if first else moved
 
 
 _NO_CUT = struct.Struct("")
@@ -474,7 +483,8 @@ class FrameDecoder:
     """
 
     def __init__(self, versions: Iterable[int] = ACCEPTED_VERSIONS, max_body: int = MAX_BODY_LENGTH) -> None:
-        self._versions = frozenset(versions)
+        # The default set is shared, not copied: a frozenset is ~0.2 kB a session.
+        self._versions = versions if isinstance(versions, frozenset) else frozenset(versions)
         self._max_body = max_body
         self._buffer = bytearray()
         self._error: ProtocolError | None = None

@@ -7,6 +7,7 @@ Most items are one subpacket; the clock is two (date and time) in the same PDU.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime, time
@@ -27,10 +28,26 @@ def first_value(values: list[Any]) -> Any:
     return values[0]
 
 
-def _clock(values: list[Any]) -> datetime:
+def combine_clock(values: list[Any]) -> datetime:
     day, clock = values
     assert isinstance(day, date) and isinstance(clock, time)
     return datetime.combine(day, clock)
+
+
+_CLOCK_FIELDS = struct.Struct(">3h")  # year, month, day (the date call) or hour, minute, second (the time call)
+
+
+def clock_value(day: Answer, clock: Answer) -> datetime | None:
+    """The clock item's value from its two answers in one step: the date fields of the first payload and the
+    time fields of the second, as one datetime (what item_value makes of them through a date, a time and
+    combine_clock; the client asks it at every new CNC second, every tick at 1 Hz). None for anything else (an
+    error code, a payload of another size, no such date or time): item_value then gives that answer's error."""
+    if day[0] or clock[0] or len(day[2]) != fn.CLOCK_PAYLOAD or len(clock[2]) != fn.CLOCK_PAYLOAD:
+        return None
+    try:
+        return datetime(*_CLOCK_FIELDS.unpack_from(day[2]), *_CLOCK_FIELDS.unpack_from(clock[2], 6))
+    except ValueError:
+        return None
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,7 +168,7 @@ def _plan(item: it.ReadItem, ctx: Context, path: int) -> ItemPlan:
         case it.ReadClock():
             calls = tuple((fn.READ_CLOCK, fn.READ_CLOCK.request(part, path=path))
                           for part in (fn.CLOCK_DATE, fn.CLOCK_TIME))
-            return ItemPlan(item, calls, _clock)
+            return ItemPlan(item, calls, combine_clock)
         case it.ReadTimer(kind=kind):
             return _one(item, fn.READ_TIMER, kind, path=path)
         case it.ReadPathStatus(path=other):

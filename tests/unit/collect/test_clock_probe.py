@@ -200,6 +200,22 @@ def test_no_reads_at_the_cncs_midnight() -> None:
     assert machine.reads and not near
 
 
+def test_the_midnight_guard_answers_alike_when_asked_again() -> None:
+    """The guard keeps its last answer (a plan aims at the same second again and again): asked in any order,
+    with repeats, around a midnight and a DST change, it answers what a fresh guard does."""
+    berlin = ZoneInfo("Europe/Berlin")
+    kept = ClockProbes(ClockTracker(berlin, max_skew_s=math.inf))
+    midnights = [int(datetime(2026, 9, 1, tzinfo=berlin).timestamp()),
+                 int(datetime(2026, 10, 25, tzinfo=berlin).timestamp())]
+    rng = random.Random(7)
+    asked = [m + rng.randint(-5, 5) for m in midnights for _ in range(60)]
+    asked += [int(datetime(2026, 10, 25, 2, 30, tzinfo=berlin).timestamp()) + k for k in (0, 0, 1, 1, 3600)]
+    for second in asked:
+        fresh = ClockProbes(ClockTracker(berlin, max_skew_s=math.inf))
+        assert kept._clear_of_midnight(second) == fresh._clear_of_midnight(second)
+    assert kept._clear_of_midnight(midnights[0]) == midnights[0] + 2  # not at the flip: the first clear second
+
+
 def test_no_reads_while_gateway_time_is_used() -> None:
     machine = VirtualMachine(Cnc(3600.0), 1.0)  # beyond max_skew_s: stamps are gateway time
     machine.run_until(60.0)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import json
 import logging
 from datetime import date, datetime
@@ -11,6 +10,7 @@ from zoneinfo import ZoneInfo
 
 import pytest
 
+from edge.collect.minute_timers import MinuteTimers
 from edge.collect.plant_state import PlantState
 from edge.collect.utilisation import UtilisationCounter, UtilisationStore
 from edge.focas.model import StatInfo
@@ -168,10 +168,42 @@ async def test_the_minute_task_publishes_every_minute_and_saves_every_fifth(tmp_
     async def publish(samples: object) -> None:
         saved_before.append(state.store.path.exists())
 
-    task = asyncio.create_task(state.run_minutes(now_ms, publish, wall=lambda: state._phase_s + 59.99))
+    minutes = MinuteTimers.for_loop().start(state, now_ms, publish, wall=lambda: state._phase_s + 59.99)
     try:
         await async_wait_for(lambda: len(saved_before) >= 6, timeout=10, message="six minute publishes")
     finally:
-        task.cancel()
+        minutes.cancel()
     assert saved_before[:6] == [False] * 5 + [True]
     assert json.loads(state.store.path.read_text())["seconds"]["OFFLINE"] == 5 * 60
+
+
+async def test_machines_share_the_minute_timer_and_a_cancelled_one_publishes_no_more(tmp_path: Path) -> None:
+    states = [PlantState(f"m{n}", BERLIN, tmp_path, now_ms=ms("2026-06-10 06:00:00")) for n in range(3)]
+    clock = [ms("2026-06-10 06:00:00")]
+
+    def now_ms() -> int:
+        clock[0] += 30_000
+        return clock[0]
+
+    published: dict[str, int] = {state.device_id: 0 for state in states}
+
+    def publisher(device_id: str):  # type: ignore[no-untyped-def]
+        async def publish(samples: object) -> None:
+            published[device_id] += 1
+        return publish
+
+    timers = MinuteTimers.for_loop()
+    assert MinuteTimers.for_loop() is timers  # one per event loop
+    rounds = [timers.start(state, now_ms, publisher(state.device_id), wall=lambda s=state: s._phase_s + 59.99)
+              for state in states]
+    try:
+        await async_wait_for(lambda: min(published.values()) >= 2, timeout=10, message="every machine's minutes")
+        rounds[1].cancel()
+        stopped_at = published["m1"]
+        others = published["m0"]
+        await async_wait_for(lambda: published["m0"] >= others + 3, timeout=10, message="the others go on")
+        assert published["m1"] == stopped_at
+        assert len(timers._heap) <= 3  # a machine waiting for its minute is one heap entry, no task
+    finally:
+        for minutes in rounds:
+            minutes.cancel()

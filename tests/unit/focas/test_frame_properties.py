@@ -204,7 +204,9 @@ def test_property_answer_splitters_sharing_a_memo_answer_as_a_fresh_split(echoes
             continue  # the memo still holds the last good answers
         answers, moved = splitter.split(body)
         assert _all_answers(splitter, body, answers) == expected
-        if moved is not None:
+        if moved is None:  # the splitter's first answer: every subpacket is new to its caller
+            assert all(answer is not None for answer in answers)
+        else:
             assert moved == [n for n, i in enumerate(shape) if last.get(i) != expected[n]]
             assert all(answers[n] == expected[n] for n in moved)
         last.update(zip(shape, expected, strict=True))
@@ -225,9 +227,13 @@ def test_answer_splitter_reparses_only_what_moved_and_notices_a_length_change() 
     assert moved == [1] and second[1] == (0, 0, b"\x00\x09") and second[0] is None and second[2] is None
     _, moved = splitter.split(body(b"\x00\x01", b"\x00\x09", b"\x00\x03"))
     assert moved == []
-    # Same total size, but the first two subpackets trade two bytes: the layout moved, split anew.
+    # Same total size, but the first two subpackets trade two bytes: the layout moved, split anew; the third
+    # subpacket is parsed but did not move.
     fourth, moved = splitter.split(body(b"", b"\x00\x09\x00\x00", b"\x00\x03"))
-    assert moved is None and [a[2] for a in fourth] == [b"", b"\x00\x09\x00\x00", b"\x00\x03"]
+    assert moved == [0, 1] and [a[2] for a in fourth] == [b"", b"\x00\x09\x00\x00", b"\x00\x03"]
+    # A string of another length among unchanged answers: only it moved.
+    _, moved = splitter.split(body(b"", b"\x00\x09\x00\x00\x00\x00", b"\x00\x03"))
+    assert moved == [1]
     with pytest.raises(ProtocolError, match="should echo"):
         splitter.split(encode_response([ResponseSubpacket(1, 0x99, 0, 0, b"", 1),
                                         *[ResponseSubpacket(c, cmd, 0, 0, p, path) for (c, path, cmd), p
@@ -254,5 +260,6 @@ def test_a_length_changed_by_another_pdu_is_not_taken_for_an_unchanged_answer() 
     old_second = encode_response([sub(0, 8, b"\x00\x00\x00\x04")])[12:]
     assert crafted[22:42] == old_second and len(crafted) == 42  # the trap: old bytes at the old offset
     answers, moved = a.split(crafted)
-    assert moved is None and list(answers) == split_response(crafted, [echo, echo])
+    # Slot 0 is what B brought (its value is B's decoding of it): only slot 1 moved.
+    assert moved == [1] and list(answers) == split_response(crafted, [echo, echo])
     assert answers[1] == (0x14, 0x14, b"\x00\x00\x00\x04\x00\x00\x00\x04")

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from edge.focas import function_entry as fe
 from edge.focas import functions as fn
 from edge.focas import items as it
-from edge.focas.errors import AccessDenied, FunctionNotAvailable, NotSupported, OutOfRange, ProtocolError
+from edge.focas.errors import AccessDenied, FocasError, FunctionNotAvailable, NotSupported, OutOfRange, ProtocolError
 from edge.focas.frame import ResponseSubpacket
 from edge.focas.function_entry import Context, Function
 from edge.focas.model import (
@@ -29,7 +29,7 @@ from edge.focas.model import (
     SysInfo,
     TimerValue,
 )
-from edge.focas.native import SUPPORTED_ITEMS, item_result, plan_item, pmc_byte_end
+from edge.focas.native import SUPPORTED_ITEMS, clock_value, item_result, item_value, plan_item, pmc_byte_end
 from edge.focas.values import SlotForm
 
 CTX16 = Context(max_axis=8, slot_form=SlotForm.FOUR_BYTE)
@@ -233,6 +233,32 @@ def test_clock_is_two_subpackets_combined() -> None:
     assert item_result(plan, answers, CTX16) == when
     answers[1] = fe.error_response(plan.requests[1], 6)
     assert isinstance(item_result(plan, answers, CTX16), FunctionNotAvailable)
+
+
+_I16 = st.integers(-(2**15), 2**15 - 1)
+
+
+_DAYS = st.one_of(st.dates(max_value=date(9999, 12, 31)).map(lambda d: (d.year, d.month, d.day)),
+                  st.tuples(_I16, _I16, _I16))
+_TIMES = st.one_of(st.times().map(lambda t: (t.hour, t.minute, t.second)), st.tuples(_I16, _I16, _I16))
+
+
+@given(_DAYS, _TIMES, st.sampled_from([0, 0, 0, 6, -8]),
+       st.sampled_from([12, 12, 12, 10, 14]))
+def test_the_clock_in_one_decode_is_the_clock_of_two(day: tuple[int, int, int], clock: tuple[int, int, int],
+                                                     rc: int, size: int) -> None:
+    """clock_value (the client's one-step decode) gives item_value's datetime for every good answer and None for
+    any other, which the client then hands to item_value for its error."""
+    plan = plan_item(it.ReadClock(), CTX16)
+    date_payload = struct.pack(">6h", *day, -1, 99, 77)[:size].ljust(size, b"\0")  # the other half: not read
+    time_payload = struct.pack(">6h", 0, 13, 99, *clock)
+    answers = [(0, 0, date_payload), (rc, 0, time_payload if rc == 0 else b"")]
+    slow = item_value(plan, answers, 0, CTX16)
+    fast = clock_value(*answers)
+    if fast is None:
+        assert isinstance(slow, FocasError), slow
+    else:
+        assert fast == slow and type(fast) is datetime
 
 
 def test_items_without_wire_code_or_with_bad_arguments() -> None:
