@@ -26,6 +26,7 @@ subscription, and gives it a GatewayMonitoredItems (a subscription has no monito
 
 from __future__ import annotations
 
+import asyncio
 import copy
 from collections.abc import Callable
 from typing import Any
@@ -50,6 +51,10 @@ CHANGES = [0]
 # benchmark could tell apart (docs/opcua.md).
 MIN_PUBLISHING_INTERVAL_MS = 20.0
 _UNBOUNDED = 1 << 62  # a queue bound no queue reaches (asyncua's queue size 0: no limit)
+# CreateMonitoredItems is served this many items at a time, the daemon's loop given a turn between two
+# chunks: asyncua creates a request's items in one go (10,000 items held the loop about half a second,
+# poll overruns and MQTT delays with it). ~25 us an item: a chunk holds the loop about 5 ms.
+CREATE_CHUNK = 200
 
 # (the item's values, monitored item id, encoded client handle, queue bound, its subscription): what a
 # change needs to be queued as a notification of a client's item (edge.opcua.address_space, inlined)
@@ -110,6 +115,33 @@ class GatewayMonitoredItems(MonitoredItemService):
         enqueue(subscription._triggered_datachanges, mid, note, item.queue_size or _UNBOUNDED)
         return True
 
+    async def create_monitored_items(
+            self, params: ua.CreateMonitoredItemsParameters) -> list[ua.MonitoredItemCreateResult]:
+        """asyncua's, in chunks of CREATE_CHUNK items with the loop given a turn between two. The subscription
+        holds back its data changes meanwhile (`GatewaySubscription.creating`): a client is sent no
+        notification of an item before the response that tells it the item exists, as without chunks."""
+        items = params.ItemsToCreate
+        if len(items) <= CREATE_CHUNK:
+            return await super().create_monitored_items(params)
+        subscription: GatewaySubscription = self.isub
+        results: list[ua.MonitoredItemCreateResult] = []
+        subscription.creating += 1
+        try:
+            for start in range(0, len(items), CREATE_CHUNK):
+                if start:
+                    await asyncio.sleep(0)
+                    if subscription.stopped:  # deleted meanwhile: what this call made goes too
+                        self.delete_all_monitored_items()
+                        return [ua.MonitoredItemCreateResult(
+                            StatusCode=ua.StatusCode(ua.StatusCodes.BadSubscriptionIdInvalid)) for _ in items]
+                chunk = ua.CreateMonitoredItemsParameters(SubscriptionId=params.SubscriptionId,
+                                                          TimestampsToReturn=params.TimestampsToReturn,
+                                                          ItemsToCreate=items[start:start + CREATE_CHUNK])
+                results += await super().create_monitored_items(chunk)
+        finally:
+            subscription.creating -= 1
+        return results
+
     def tap(self, handle: int) -> Tap | None:
         """The tap of the item behind `handle` when a change may be queued for it directly, without `notify`'s
         checks: a client's item, enabled, with no filter, in a subscription with a publishing interval. Valid
@@ -152,11 +184,27 @@ class GatewayMonitoredItems(MonitoredItemService):
 
 
 class GatewaySubscription(InternalSubscription):
-    """asyncua's subscription, publishing its data changes as one pre-encoded notification."""
+    """asyncua's subscription, publishing its data changes as one pre-encoded notification.
+
+    Two attributes of its own, set when its class is switched: `creating`, the CreateMonitoredItems calls under
+    way in chunks (its data changes are held back meanwhile: publishes are keep-alives), and `stopped`."""
+
+    creating: int
+    stopped: bool
+
+    def has_published_results(self) -> bool:
+        if self.creating and not self._startup:  # data changes held: a keep-alive when one is due
+            self._keep_alive_count += 1
+            return bool(self._keep_alive_count >= self.data.RevisedMaxKeepAliveCount)
+        return super().has_published_results()
+
+    async def stop(self) -> None:
+        self.stopped = True
+        await super().stop()
 
     def _pop_triggered_datachanges(self, result: ua.PublishResult) -> None:
         queued: dict[int, list[Any]] = self._triggered_datachanges
-        if not queued:
+        if not queued or self.creating:
             return
         notification: Any
         if self.pub_request_callback is None:  # one of the server's own: its callback reads the objects
@@ -188,6 +236,8 @@ class GatewaySubscriptions(SubscriptionService):
         result = await super().create_subscription(params, callback, session_id, request_callback)
         subscription = self.subscriptions[result.SubscriptionId]
         subscription.__class__ = GatewaySubscription
+        subscription.creating = 0
+        subscription.stopped = False
         subscription.monitored_item_srv = GatewayMonitoredItems(subscription, self.aspace)
         return result
 
