@@ -34,7 +34,7 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 from asyncua.server.internal_subscription import InternalSubscription
-from asyncua.server.monitored_item_service import MonitoredItemService
+from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
 from asyncua.server.subscription_service import SubscriptionService
 
 from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
@@ -63,6 +63,41 @@ Tap = tuple[Any, int, bytes, int, InternalSubscription]
 
 def _changed() -> None:
     CHANGES[0] += 1
+
+
+class TappedValues(MonitoredItemValues):
+    """A tapped item's values (`link`): its current value is its metric's, read from the metric's slot (`read()`),
+    since every change of the metric reaches the item while it is tapped. A change then costs no store per item.
+
+    Unlinked (`unlink`) when the slot's taps are made again, with the value the item last saw; asyncua's or
+    `notify`'s store into it (the item off its tap before the slot noticed) unlinks it too."""
+
+    slot: Any
+
+    @property
+    def current_dvalue(self) -> ua.DataValue | None:
+        return self.slot.read()
+
+    @current_dvalue.setter
+    def current_dvalue(self, value: ua.DataValue | None) -> None:
+        self.__class__ = MonitoredItemValues
+        self.current_dvalue = value
+
+
+def link(values: MonitoredItemValues, slot: Any) -> None:
+    """Make a tapped item's current value its slot's (TappedValues)."""
+    if type(values) is MonitoredItemValues:
+        values.__class__ = TappedValues
+    if type(values) is TappedValues:
+        values.slot = slot
+
+
+def unlink(values: MonitoredItemValues) -> None:
+    """The item's current value held by the item again: the one it last saw, its slot's until now."""
+    if type(values) is TappedValues:
+        current = values.slot.read()
+        values.__class__ = MonitoredItemValues
+        values.current_dvalue = current
 
 
 def enqueue(queue: dict[int, list[Any]], mid: int, note: Any, bound: int) -> None:

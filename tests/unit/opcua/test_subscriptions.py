@@ -284,3 +284,16 @@ async def test_a_large_create_gives_the_loop_turns_and_holds_its_changes_until_i
     expected = [(1000 + h, 7.0 if h % 4 == 1 and h >= chunk else 0.0) for h in range(count)]
     expected += [(1000 + h, 7.0) for h in range(chunk) if h % 4 == 1]
     assert sorted((handle, value) for handle, value, _ in await subscribed.publish()) == sorted(expected)
+
+
+async def test_a_tapped_item_off_and_on_again_compares_with_the_value_it_last_saw(subscribed: Subscribed) -> None:
+    item = await subscribed.monitor("Macro/2", 61, queue_size=5)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/2", 5.0, 6.0))  # through the item's tap
+    assert await subscribed.publish() == [(61, 5.0, 0), (61, 6.0, 0)]
+    service = subscribed.subscription.monitored_item_srv
+    await service.set_monitoring_mode(ua.MonitoringMode.Disabled, [item])
+    await service.set_monitoring_mode(ua.MonitoringMode.Reporting, [item])
+    assert await subscribed.publish() == []  # 6.0 again: nothing a client would see has changed
+    await _feed(subscribed, _values("Macro/2", 6.0, ms=CNC_MS + 900) + _values("Macro/2", 7.0))
+    assert await subscribed.publish() == [(61, 7.0, 0)]
