@@ -37,7 +37,9 @@ from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
 from asyncua.server.subscription_service import SubscriptionService
 
+from edge.opcua import pending_items
 from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
+from edge.opcua.pending_items import PendingItems
 from edge.opcua.values import SharedDataValue, same_reading
 
 _DISABLED = ua.MonitoringMode.Disabled
@@ -169,10 +171,15 @@ class GatewayMonitoredItems(MonitoredItemService):
                         self.delete_all_monitored_items()
                         return [ua.MonitoredItemCreateResult(
                             StatusCode=ua.StatusCode(ua.StatusCodes.BadSubscriptionIdInvalid)) for _ in items]
-                chunk = ua.CreateMonitoredItemsParameters(SubscriptionId=params.SubscriptionId,
-                                                          TimestampsToReturn=params.TimestampsToReturn,
-                                                          ItemsToCreate=items[start:start + CREATE_CHUNK])
-                results += await super().create_monitored_items(chunk)
+                try:  # a request still being decoded (edge.opcua.pending_items) decodes its next chunk
+                    chunk = items.take(CREATE_CHUNK) if isinstance(items, PendingItems) \
+                        else items[start:start + CREATE_CHUNK]
+                except Exception:  # a malformed item: the request fails whole, as when asyncua decodes it
+                    self.delete_monitored_items([r.MonitoredItemId for r in results if r.StatusCode.is_good()])
+                    raise
+                results += await super().create_monitored_items(ua.CreateMonitoredItemsParameters(
+                    SubscriptionId=params.SubscriptionId, TimestampsToReturn=params.TimestampsToReturn,
+                    ItemsToCreate=chunk))
         finally:
             subscription.creating -= 1
         return results
@@ -296,7 +303,9 @@ class GatewayAddressSpace(CountedCallbacks, AddressSpace):
 
 def install(service: SubscriptionService) -> None:
     """Make `service` (the server's, before any client subscribes) create GatewaySubscriptions, and its address
-    space count its data-change callbacks' changes (the address space keeps a metric's taps until they move)."""
+    space count its data-change callbacks' changes (the address space keeps a metric's taps until they move);
+    CreateMonitoredItems requests are decoded chunk by chunk as they are served (edge.opcua.pending_items)."""
+    pending_items.install()
     service.__class__ = GatewaySubscriptions
     aspace = service.aspace
     kind = type(aspace)
