@@ -218,8 +218,6 @@ class OpcUaOutput:
                 except Exception:
                     self.failures += 1
                     log.exception("OPC UA server could not apply kind=%s machine=%s", item[0], item[1])
-                if item[0] == "online":  # a birth builds a machine's nodes (tens of ms): the loop gets a turn
-                    await asyncio.sleep(0)  # between two, not a fleet's births in one go (0.5 s at 100)
             self._draining = False
 
     @staticmethod

@@ -95,21 +95,3 @@ async def test_items_on_asyncuas_path_are_awaited_by_the_drain(output: OpcUaOutp
         await async_wait_for(lambda: told == [(5, "value")], message="the filtered item told")
     finally:
         await output.stop()
-
-
-async def test_the_loop_gets_a_turn_between_two_births(output: OpcUaOutput) -> None:
-    server: _Server = output.server  # type: ignore[assignment]
-    server.release.set()  # births apply at once
-    await output.start()
-    try:
-        for machine in ("m1", "m2", "m3"):
-            await output.device_online(machine, [SPEC], _batch(0.0))
-        births_seen: list[int] = []
-        while len(births_seen) < 10 and output.pending:  # each turn of this loop is one the drain gave back
-            births_seen.append(len(server.calls))
-            await asyncio.sleep(0)
-        await async_wait_for(lambda: output.pending == 0, message="all births applied")
-        assert len(server.calls) == 3
-        assert 1 in births_seen and 2 in births_seen  # this task ran after the first and after the second birth
-    finally:
-        await output.stop()
