@@ -17,6 +17,7 @@ DataValue is built when a monitored item is told of the change, or when a client
 from __future__ import annotations
 
 import logging
+import struct
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -26,14 +27,18 @@ from asyncua import ua
 from asyncua.server.internal_server import InternalServer
 
 from edge.opcua import layout, nodes
+from edge.opcua.encoding import MAX_MS, MIN_MS, TICKS_PER_MS, WIN_EPOCH_OFFSET_MS
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, enqueue, notify_all, taps_of
+from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, enqueue, link, taps_of, unlink
 from edge.opcua.values import (
-    ServerTime,
+    KINDS,
+    NULL_TYPE,
+    QUALITY_STATUS,
+    WIN_EPOCH_US,
+    LazyDataValue,
     SharedDataValue,
     data_value,
     offline_value,
-    same_reading,
     server_now,
     server_time,
     status_code,
@@ -82,6 +87,11 @@ class MetricSlot:
     taps: list[Tap] = field(default_factory=lambda: _NO_TAPS)
     others: list[tuple[int, Any]] = field(default_factory=lambda: _NO_OTHERS)
     watched: bool = False
+    # what a client sees of the value shown (raw value, variant type, status code), for the StatusValue
+    # trigger without a DataValue; code -1: not known (a change nobody watched), `reading` finds it
+    raw: object = None
+    vtype: Any = None
+    code: int = -1
 
     def read(self, _node_id: object = None, _attribute_id: object = None) -> SharedDataValue:
         """The DataValue the nodes show (asyncua's value_callback: Read, a new monitored item's first value)."""
@@ -91,7 +101,20 @@ class MetricSlot:
             shown = self.shown = data_value(self.sample, server_time(self.server_ns))
         return shown
 
+    def reading(self) -> tuple[object, Any, int]:
+        """(raw value, variant type, status code) of the value shown; a code of -1 when none compares equal."""
+        if self.code >= 0:
+            return self.raw, self.vtype, self.code
+        if self.shown is None and self.sample is None:
+            return None, None, -1
+        shown = self.read()
+        if type(shown) is LazyDataValue:
+            return shown.raw, shown.vtype, shown.StatusCode.value
+        return None, None, -1  # (the waiting or offline value: no sample's value equals it)
+
     def retap(self, changes: int) -> None:
+        for tap in self.taps:
+            unlink(tap[0])
         taps: list[Tap] = []
         others: list[tuple[int, Any]] = []
         for attribute in self.attributes:
@@ -99,6 +122,8 @@ class MetricSlot:
                 more_taps, more_others = taps_of(attribute.datachange_callbacks)
                 taps += more_taps
                 others += more_others
+        for tap in taps:
+            link(tap[0], self)
         self.taps = taps or _NO_TAPS
         self.others = others or _NO_OTHERS
         self.watched = bool(taps or others)
@@ -248,47 +273,77 @@ class GatewaySpace:
         notification's bytes, with `notify`'s checks made when the taps were. The StatusValue trigger (no
         notification when neither value nor status changed) is checked once per value, against the value the
         metric showed: every tapped item has been told each value since it was created or enabled (when its
-        own first value was this slot's), so that is the value each of them last saw."""
+        own first value was this slot's), so that is the value each of them last saw.
+
+        A monitored change builds no DataValue: the usual value (of the node's Python type, Good or Uncertain)
+        is encoded here, compared by (raw value, variant type, status code) kept in the slot, and its
+        DataValue built from the sample only when read (a Read, an item not on a tap). A tapped item's
+        current value is the slot's (subscriptions.TappedValues), not stored per change."""
         machine = self.machines.get(device_id)
         if machine is None:
             return _NO_PENDING
         slots = machine.slots
         now_ns = time.time_ns()
-        now: ServerTime | None = None  # built for the first monitored value
+        server_ticks = (now_ns // 1000 + WIN_EPOCH_US) * 10  # the ServerTimestamp, as server_time(now_ns) has it
         changes = CHANGES[0]
         count = 0
         slow = _NO_PENDING
+        kinds, qualities = KINDS, QUALITY_STATUS
         for sample in samples:
             slot = slots.get(sample.name)
             if slot is None or sample.historical:
                 continue
-            slot.sample = sample
-            slot.server_ns = now_ns
             count += 1
             if slot.changes != changes:
-                slot.retap(changes)
+                slot.retap(changes)  # (before the slot takes the sample: unlinked items keep the value they saw)
             if not slot.watched:
+                slot.sample = sample
+                slot.server_ns = now_ns
                 slot.shown = None  # built from the sample when read
+                slot.code = -1
                 continue
-            if now is None:
-                now = server_time(now_ns)
-            value = data_value(sample, now)
-            previous = slot.shown
-            slot.shown = value
-            taps = slot.taps
-            if taps:
-                if previous is None or not same_reading(previous, value):
-                    encoded = value.encoded
-                    for values, mid, prefix, bound, subscription in taps:  # GatewayMonitoredItems.notify's work
-                        values.current_dvalue = value
-                        enqueue(subscription._triggered_datachanges, mid, prefix + encoded, bound)
-                else:
-                    for tap in taps:
-                        tap[0].current_dvalue = value
-            for handle, callback in slot.others:
-                owner = getattr(callback, "__self__", None)
-                if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
-                    slow = _pending(slow, ((handle, callback),), value)
+            # data_value's encoding, inline for the usual value (of the node's Python type, Good or Uncertain)
+            _status, bad, code = qualities[sample.quality]
+            native, _convert, vtype, encode = kinds[sample.type]
+            raw = sample.value
+            stamp = sample.timestamp_ms
+            encoded = None
+            if not bad and type(raw) is native and MIN_MS < stamp < MAX_MS:
+                try:
+                    encoded = encode(raw, code, (stamp + WIN_EPOCH_OFFSET_MS) * TICKS_PER_MS, server_ticks)
+                except (struct.error, OverflowError):  # outside the node's type: data_value's BadTypeMismatch
+                    encoded = None
+            built = None
+            if encoded is None:  # any other: data_value's own way (conversion, null, BadTypeMismatch)
+                built = data_value(sample, server_time(now_ns))
+                raw, vtype, code, encoded = built.raw, built.vtype, built.StatusCode.value, built.encoded
+            before = slot.code
+            if before < 0:
+                before_raw, before_vtype, before = slot.reading()
+            else:
+                before_raw, before_vtype = slot.raw, slot.vtype
+            slot.sample = sample
+            slot.server_ns = now_ns
+            slot.shown = built  # None: built from the sample when read
+            slot.raw = raw
+            slot.vtype = vtype
+            slot.code = code
+            if before != code or before_vtype is not vtype or before_raw != raw:  # asyncua's StatusValue trigger
+                for _values, mid, prefix, bound, subscription in slot.taps:  # GatewayMonitoredItems.notify's work
+                    queue = subscription._triggered_datachanges
+                    pending = queue.get(mid)
+                    if pending is None:
+                        queue[mid] = [prefix + encoded]
+                    else:
+                        if len(pending) >= bound:
+                            del pending[0]
+                        pending.append(prefix + encoded)
+            if slot.others:
+                value = slot.read()
+                for handle, callback in slot.others:
+                    owner = getattr(callback, "__self__", None)
+                    if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+                        slow = _pending(slow, ((handle, callback),), value)
         self.values_set += count
         return slow
 
@@ -299,15 +354,23 @@ class GatewaySpace:
             return _NO_PENDING
         machine.online = False
         value = offline_value(server_now())
+        code = value.StatusCode.value
+        changes = CHANGES[0]
         slow = _NO_PENDING
         for slot in machine.slots.values():
+            if slot.changes != changes:
+                slot.retap(changes)
+            before_raw, before_vtype, before = slot.reading()
             slot.shown = value
             slot.sample = None
-            for attribute in slot.attributes:
-                if attribute.datachange_callbacks:  # monitored: the gateway's items take it synchronously
-                    others = notify_all(attribute.datachange_callbacks, value)
-                    if others:
-                        slow = _pending(slow, others, value)
+            slot.raw, slot.vtype, slot.code = None, NULL_TYPE, code
+            if before != code or before_vtype is not NULL_TYPE or before_raw is not None:
+                for _values, mid, prefix, bound, subscription in slot.taps:
+                    enqueue(subscription._triggered_datachanges, mid, prefix + value.encoded, bound)
+            for handle, callback in slot.others:
+                owner = getattr(callback, "__self__", None)
+                if type(owner) is not GatewayMonitoredItems or not owner.notify(handle, value):
+                    slow = _pending(slow, ((handle, callback),), value)
         return slow
 
     async def update(self, device_id: str, samples: Iterable[Sample]) -> None:

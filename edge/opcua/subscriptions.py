@@ -26,6 +26,7 @@ subscription, and gives it a GatewayMonitoredItems (a subscription has no monito
 
 from __future__ import annotations
 
+import asyncio
 import copy
 from collections.abc import Callable
 from typing import Any
@@ -33,10 +34,12 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 from asyncua.server.internal_subscription import InternalSubscription
-from asyncua.server.monitored_item_service import MonitoredItemService
+from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
 from asyncua.server.subscription_service import SubscriptionService
 
+from edge.opcua import pending_items
 from edge.opcua.encoding import data_change_of_notes, data_value_bytes, handle_prefix
+from edge.opcua.pending_items import PendingItems
 from edge.opcua.values import SharedDataValue, same_reading
 
 _DISABLED = ua.MonitoringMode.Disabled
@@ -50,6 +53,10 @@ CHANGES = [0]
 # benchmark could tell apart (docs/opcua.md).
 MIN_PUBLISHING_INTERVAL_MS = 20.0
 _UNBOUNDED = 1 << 62  # a queue bound no queue reaches (asyncua's queue size 0: no limit)
+# CreateMonitoredItems is served this many items at a time, the daemon's loop given a turn between two
+# chunks: asyncua creates a request's items in one go (10,000 items held the loop about half a second,
+# poll overruns and MQTT delays with it). ~25 us an item: a chunk holds the loop about 5 ms.
+CREATE_CHUNK = 200
 
 # (the item's values, monitored item id, encoded client handle, queue bound, its subscription): what a
 # change needs to be queued as a notification of a client's item (edge.opcua.address_space, inlined)
@@ -58,6 +65,41 @@ Tap = tuple[Any, int, bytes, int, InternalSubscription]
 
 def _changed() -> None:
     CHANGES[0] += 1
+
+
+class TappedValues(MonitoredItemValues):
+    """A tapped item's values (`link`): its current value is its metric's, read from the metric's slot (`read()`),
+    since every change of the metric reaches the item while it is tapped. A change then costs no store per item.
+
+    Unlinked (`unlink`) when the slot's taps are made again, with the value the item last saw; asyncua's or
+    `notify`'s store into it (the item off its tap before the slot noticed) unlinks it too."""
+
+    slot: Any
+
+    @property
+    def current_dvalue(self) -> ua.DataValue | None:
+        return self.slot.read()
+
+    @current_dvalue.setter
+    def current_dvalue(self, value: ua.DataValue | None) -> None:
+        self.__class__ = MonitoredItemValues
+        self.current_dvalue = value
+
+
+def link(values: MonitoredItemValues, slot: Any) -> None:
+    """Make a tapped item's current value its slot's (TappedValues)."""
+    if type(values) is MonitoredItemValues:
+        values.__class__ = TappedValues
+    if type(values) is TappedValues:
+        values.slot = slot
+
+
+def unlink(values: MonitoredItemValues) -> None:
+    """The item's current value held by the item again: the one it last saw, its slot's until now."""
+    if type(values) is TappedValues:
+        current = values.slot.read()
+        values.__class__ = MonitoredItemValues
+        values.current_dvalue = current
 
 
 def enqueue(queue: dict[int, list[Any]], mid: int, note: Any, bound: int) -> None:
@@ -110,6 +152,38 @@ class GatewayMonitoredItems(MonitoredItemService):
         enqueue(subscription._triggered_datachanges, mid, note, item.queue_size or _UNBOUNDED)
         return True
 
+    async def create_monitored_items(
+            self, params: ua.CreateMonitoredItemsParameters) -> list[ua.MonitoredItemCreateResult]:
+        """asyncua's, in chunks of CREATE_CHUNK items with the loop given a turn between two. The subscription
+        holds back its data changes meanwhile (`GatewaySubscription.creating`): a client is sent no
+        notification of an item before the response that tells it the item exists, as without chunks."""
+        items = params.ItemsToCreate
+        if len(items) <= CREATE_CHUNK:
+            return await super().create_monitored_items(params)
+        subscription: GatewaySubscription = self.isub
+        results: list[ua.MonitoredItemCreateResult] = []
+        subscription.creating += 1
+        try:
+            for start in range(0, len(items), CREATE_CHUNK):
+                if start:
+                    await asyncio.sleep(0)
+                    if subscription.stopped:  # deleted meanwhile: what this call made goes too
+                        self.delete_all_monitored_items()
+                        return [ua.MonitoredItemCreateResult(
+                            StatusCode=ua.StatusCode(ua.StatusCodes.BadSubscriptionIdInvalid)) for _ in items]
+                try:  # a request still being decoded (edge.opcua.pending_items) decodes its next chunk
+                    chunk = items.take(CREATE_CHUNK) if isinstance(items, PendingItems) \
+                        else items[start:start + CREATE_CHUNK]
+                except Exception:  # a malformed item: the request fails whole, as when asyncua decodes it
+                    self.delete_monitored_items([r.MonitoredItemId for r in results if r.StatusCode.is_good()])
+                    raise
+                results += await super().create_monitored_items(ua.CreateMonitoredItemsParameters(
+                    SubscriptionId=params.SubscriptionId, TimestampsToReturn=params.TimestampsToReturn,
+                    ItemsToCreate=chunk))
+        finally:
+            subscription.creating -= 1
+        return results
+
     def tap(self, handle: int) -> Tap | None:
         """The tap of the item behind `handle` when a change may be queued for it directly, without `notify`'s
         checks: a client's item, enabled, with no filter, in a subscription with a publishing interval. Valid
@@ -152,11 +226,27 @@ class GatewayMonitoredItems(MonitoredItemService):
 
 
 class GatewaySubscription(InternalSubscription):
-    """asyncua's subscription, publishing its data changes as one pre-encoded notification."""
+    """asyncua's subscription, publishing its data changes as one pre-encoded notification.
+
+    Two attributes of its own, set when its class is switched: `creating`, the CreateMonitoredItems calls under
+    way in chunks (its data changes are held back meanwhile: publishes are keep-alives), and `stopped`."""
+
+    creating: int
+    stopped: bool
+
+    def has_published_results(self) -> bool:
+        if self.creating and not self._startup:  # data changes held: a keep-alive when one is due
+            self._keep_alive_count += 1
+            return bool(self._keep_alive_count >= self.data.RevisedMaxKeepAliveCount)
+        return super().has_published_results()
+
+    async def stop(self) -> None:
+        self.stopped = True
+        await super().stop()
 
     def _pop_triggered_datachanges(self, result: ua.PublishResult) -> None:
         queued: dict[int, list[Any]] = self._triggered_datachanges
-        if not queued:
+        if not queued or self.creating:
             return
         notification: Any
         if self.pub_request_callback is None:  # one of the server's own: its callback reads the objects
@@ -188,6 +278,8 @@ class GatewaySubscriptions(SubscriptionService):
         result = await super().create_subscription(params, callback, session_id, request_callback)
         subscription = self.subscriptions[result.SubscriptionId]
         subscription.__class__ = GatewaySubscription
+        subscription.creating = 0
+        subscription.stopped = False
         subscription.monitored_item_srv = GatewayMonitoredItems(subscription, self.aspace)
         return result
 
@@ -211,7 +303,9 @@ class GatewayAddressSpace(CountedCallbacks, AddressSpace):
 
 def install(service: SubscriptionService) -> None:
     """Make `service` (the server's, before any client subscribes) create GatewaySubscriptions, and its address
-    space count its data-change callbacks' changes (the address space keeps a metric's taps until they move)."""
+    space count its data-change callbacks' changes (the address space keeps a metric's taps until they move);
+    CreateMonitoredItems requests are decoded chunk by chunk as they are served (edge.opcua.pending_items)."""
+    pending_items.install()
     service.__class__ = GatewaySubscriptions
     aspace = service.aspace
     kind = type(aspace)

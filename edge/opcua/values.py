@@ -63,6 +63,7 @@ def status_code(name: str) -> ua.StatusCode:
 
 
 _WIN_EPOCH_US = 11_644_473_600_000_000  # OPC UA DateTime's epoch (1601-01-01) is this many us before Unix's
+WIN_EPOCH_US = _WIN_EPOCH_US
 
 
 class ServerTime(NamedTuple):
@@ -158,6 +159,7 @@ def _status_of(quality: object) -> tuple[ua.StatusCode, bool, int]:
 
 
 _QUALITY_STATUS = {quality: _status_of(quality) for quality in Quality}  # quality -> (status, is bad, its code)
+QUALITY_STATUS = _QUALITY_STATUS
 
 
 def data_value(sample: Sample, server: ServerTime) -> SharedDataValue:
@@ -225,6 +227,8 @@ _NATIVE: dict[MetricType, type | None] = {
 # metric type -> (native type, converter, variant type, encoder): one lookup per value
 _KINDS = {kind: (_NATIVE[kind], convert, _VARIANT[kind], ENCODERS[_VARIANT[kind]])
           for kind, convert in _CONVERT.items()}
+KINDS = _KINDS  # (edge.opcua.address_space encodes the usual value inline, data_value the others)
+NULL_TYPE = _NULL_TYPE
 
 
 def client_value(variant: ua.Variant, kind: MetricType) -> tuple[bool, object]:

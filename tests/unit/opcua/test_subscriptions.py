@@ -3,6 +3,7 @@ each publish carries, decoded from its bytes as a client would."""
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -252,3 +253,47 @@ async def test_a_client_asking_a_faster_publishing_interval_gets_the_servers_min
                                                     request_callback=lambda _id: None)
         assert created.RevisedPublishingInterval == revised
         await service.delete_subscriptions([created.SubscriptionId])
+
+
+async def test_a_large_create_gives_the_loop_turns_and_holds_its_changes_until_it_answers(
+        subscribed: Subscribed) -> None:
+    await subscribed.publish()
+    count = 2 * subscriptions.CREATE_CHUNK + 10
+    items = []
+    for handle in range(count):
+        item = ua.MonitoredItemCreateRequest()
+        item.ItemToMonitor = ua.ReadValueId(NodeId=ua.NodeId(f"{subscribed.machine}/Metrics/Macro/{handle % 4}",
+                                                             subscribed.space.ns), AttributeId=ua.AttributeIds.Value)
+        item.MonitoringMode = ua.MonitoringMode.Reporting
+        item.RequestedParameters = ua.MonitoringParameters(ClientHandle=1000 + handle, QueueSize=5)
+        items.append(item)
+    create = asyncio.ensure_future(subscribed.subscription.monitored_item_srv.create_monitored_items(
+        ua.CreateMonitoredItemsParameters(ItemsToCreate=items)))
+    turns = 0
+    while not create.done():  # each turn of this loop is one the create gave the loop back
+        turns += 1
+        if turns == 2:  # created in part: a publish now carries none of their values, nor a new one
+            await _feed(subscribed, _values("Macro/1", 7.0))
+            assert await subscribed.publish() == []
+        await asyncio.sleep(0)
+    results = create.result()
+    assert turns >= 2
+    assert [result.StatusCode.is_good() for result in results] == [True] * count
+    # held back until the answer: each item's first value, and 7.0 for those of Macro/1 made before it came
+    chunk = subscriptions.CREATE_CHUNK
+    expected = [(1000 + h, 7.0 if h % 4 == 1 and h >= chunk else 0.0) for h in range(count)]
+    expected += [(1000 + h, 7.0) for h in range(chunk) if h % 4 == 1]
+    assert sorted((handle, value) for handle, value, _ in await subscribed.publish()) == sorted(expected)
+
+
+async def test_a_tapped_item_off_and_on_again_compares_with_the_value_it_last_saw(subscribed: Subscribed) -> None:
+    item = await subscribed.monitor("Macro/2", 61, queue_size=5)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/2", 5.0, 6.0))  # through the item's tap
+    assert await subscribed.publish() == [(61, 5.0, 0), (61, 6.0, 0)]
+    service = subscribed.subscription.monitored_item_srv
+    await service.set_monitoring_mode(ua.MonitoringMode.Disabled, [item])
+    await service.set_monitoring_mode(ua.MonitoringMode.Reporting, [item])
+    assert await subscribed.publish() == []  # 6.0 again: nothing a client would see has changed
+    await _feed(subscribed, _values("Macro/2", 6.0, ms=CNC_MS + 900) + _values("Macro/2", 7.0))
+    assert await subscribed.publish() == [(61, 7.0, 0)]
