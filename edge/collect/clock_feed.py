@@ -96,11 +96,11 @@ class ClockFeed:
         offered). Most new CNC seconds move none of them; at 1 Hz that is every tick."""
         tracker = self.tracker
         skew = tracker.skew_s
-        uncertainty = tracker.uncertainty_at(mid_mono)
+        uncertainty, slew_lag, synchronised = tracker.stamp_quality_at(mid_mono)
         skew_ms = round(skew, 3) if skew is not None else None
         # Whole milliseconds, rounded up: still a bound, and it moves every ~10 s as readings age, not every tick
         uncertainty_ms = float(math.ceil(uncertainty * 1000)) if uncertainty is not None else None
-        offered = (skew_ms, tracker.use_gateway_time, uncertainty_ms, tracker.synchronised_at(mid_mono))
+        offered = (skew_ms, tracker.use_gateway_time, uncertainty_ms, synchronised)
         if offered != self._offered:
             self._offered = offered
             for sample in (
@@ -113,5 +113,5 @@ class ClockFeed:
             ):
                 if sample is not None:
                     samples.append(sample)
-        self.news = tracker.slew_lag_at(mid_mono) > 0.0  # while stamps slew, Synchronised may turn true
+        self.news = slew_lag > 0.0  # while stamps slew, Synchronised may turn true
 

@@ -165,10 +165,12 @@ class ClockProbes:
         if revision == self._revision and now < self._valid_until:
             return self._send
         self._revision = revision
-        self._unbook()
-        self._send = self._plan(now, max(half_rtt_s, 0.0))
-        self._valid_until = min(self._send, now + REPLAN_S)
-        return self._send
+        if self._booking is not None:
+            self._unbook()
+        send = self._send = self._plan(now, 0.0 if half_rtt_s < 0.0 else half_rtt_s)  # max(half_rtt_s, 0.0)
+        until = now + REPLAN_S
+        self._valid_until = send if send < until else until  # min(send, until), as the min() it replaces
+        return send
 
     @property
     def kind(self) -> ProbeKind:
@@ -194,7 +196,9 @@ class ClockProbes:
             self._verified = verified
             self._kind, earliest = ProbeKind.VERIFY, verified + self.verify_every_s
             aim = self._side * (uncertainty + half_rtt + VERIFY_MARGIN_S)
-        earliest = max(earliest, now + LEAD_S + half_rtt, self._budget_ready())
+        earliest = max(earliest, now + LEAD_S + half_rtt)
+        if self._tokens < 1.0 and self._tokens_at is not None:  # the budget is spent (_budget_ready)
+            earliest = max(earliest, self._budget_ready())
         if self._kind is ProbeKind.NARROW and self.calendar is not None:
             return self._booked_narrowing(earliest, offset, uncertainty) - half_rtt
         return self._flip_after(earliest, offset, aim) - half_rtt
@@ -222,7 +226,9 @@ class ClockProbes:
     def _flip_after(self, earliest: float, offset: float, aim: float) -> float:
         """The first gateway moment at or after `earliest` that is `aim` seconds from a predicted CNC second
         flip (the CNC shows second N from `N - offset` on), skipping the CNC's midnight."""
-        return self._clear_of_midnight(math.ceil(earliest + offset - aim)) - offset + aim
+        second = math.ceil(earliest + offset - aim)
+        asked, answer = self._clear  # _clear_of_midnight's kept answer, checked here: a plan a CNC second
+        return (answer if second == asked else self._clear_of_midnight(second)) - offset + aim
 
     def _clear_of_midnight(self, second: int) -> int:
         """The first CNC second from `second` on that is not within MIDNIGHT_GUARD_S of its midnight. The last
