@@ -305,7 +305,7 @@ class GatewaySpace:
         server_ticks = (now_ns // 1000 + WIN_EPOCH_US) * 10  # the ServerTimestamp, as server_time(now_ns) has it
         changes = CHANGES[0]
         count = 0
-        if machine.checked_at != changes:
+        if machine.checked_at != changes:  # every slot's taps made again here, not per value in the loop
             machine.quiet = _retap_all(machine, changes)
             machine.checked_at = changes
         if machine.quiet:  # nobody watches any of its values: each is only stored, built when read
@@ -326,8 +326,6 @@ class GatewaySpace:
             if slot is None or sample.historical:
                 continue
             count += 1
-            if slot.changes != changes:
-                slot.retap(changes)  # (before the slot takes the sample: unlinked items keep the value they saw)
             if not slot.watched:
                 slot.sample = sample
                 slot.server_ns = now_ns
