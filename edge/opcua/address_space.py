@@ -130,6 +130,18 @@ class MetricSlot:
         self.changes = changes
 
 
+def _retap_all(machine: MachineNodes, changes: int) -> bool:
+    """Make the taps of every slot of the machine not made at `changes` (before any takes a sample of the
+    batch: an unlinked item keeps the value it saw); whether no slot is watched."""
+    quiet = True
+    for slot in machine.slots.values():
+        if slot.changes != changes:
+            slot.retap(changes)
+        if slot.watched:
+            quiet = False
+    return quiet
+
+
 @dataclass
 class MachineNodes:
     device_id: str
@@ -138,6 +150,10 @@ class MachineNodes:
     slots: dict[str, MetricSlot] = field(default_factory=dict)
     paths: set[str] = field(default_factory=set)  # paths below the machine object that have a node
     online: bool = False
+    # no slot of the machine reaches a monitored item (every slot's taps made at CHANGES[0] == `checked_at`):
+    # `show` then only stores each sample (the server with no client, or a client watching other machines)
+    quiet: bool = False
+    checked_at: int = -1
 
 
 class GatewaySpace:
@@ -192,6 +208,7 @@ class GatewaySpace:
             for node_id in slot.node_ids:
                 self.by_node[node_id] = (device_id, name)
         machine.online = True
+        machine.checked_at = -1  # new slots: `show` looks again whether the machine is quiet
         return machine
 
     def _create_machine(self, device_id: str) -> MachineNodes:
@@ -262,6 +279,7 @@ class GatewaySpace:
                 params.NodesToDelete.append(ua.DeleteNodesItem(NodeId=node_id, DeleteTargetReferences=True))
                 machine.paths.discard(str(node_id.Identifier).split("/", 1)[1])
         self.iserver.node_mgt_service.delete_nodes(params)
+        machine.checked_at = -1
         log.info("metrics removed from OPC UA machine=%s count=%d", machine.device_id, len(names))
 
     # ---- values ------------------------------------------------------------------------------------
@@ -287,6 +305,20 @@ class GatewaySpace:
         server_ticks = (now_ns // 1000 + WIN_EPOCH_US) * 10  # the ServerTimestamp, as server_time(now_ns) has it
         changes = CHANGES[0]
         count = 0
+        if machine.checked_at != changes:  # every slot's taps made again here, not per value in the loop
+            machine.quiet = _retap_all(machine, changes)
+            machine.checked_at = changes
+        if machine.quiet:  # nobody watches any of its values: each is only stored, built when read
+            for sample in samples:
+                slot = slots.get(sample.name)
+                if slot is not None and not sample.historical:
+                    slot.sample = sample
+                    slot.server_ns = now_ns
+                    slot.shown = None
+                    slot.code = -1
+                    count += 1
+            self.values_set += count
+            return _NO_PENDING
         slow = _NO_PENDING
         kinds, qualities = KINDS, QUALITY_STATUS
         for sample in samples:
@@ -294,8 +326,6 @@ class GatewaySpace:
             if slot is None or sample.historical:
                 continue
             count += 1
-            if slot.changes != changes:
-                slot.retap(changes)  # (before the slot takes the sample: unlinked items keep the value they saw)
             if not slot.watched:
                 slot.sample = sample
                 slot.server_ns = now_ns

@@ -58,6 +58,7 @@ class OpcUaOutput:
         self._mailbox: deque[tuple[Any, ...]] = deque()
         self._wake_pending = False
         self._inline = False  # data batches applied in device_data: the server runs on the daemon's loop
+        self._show_now: Callable[[str, Sequence[Sample]], list[Any]] = self.server.show_data
         self._draining = False
         self._wake: asyncio.Event | None = None
         self._server_loop: asyncio.AbstractEventLoop | None = None
@@ -137,6 +138,7 @@ class OpcUaOutput:
         self._wake = asyncio.Event()
         await self.server.start()
         self._drain = asyncio.create_task(self._drain_loop(), name="opcua-drain")
+        self._show_now = self.server.show_data  # (the address space's own method, once the server has started)
         self._inline = self._thread is None
         if self._mailbox:  # posted before the server was up
             self._wake_pending = True
@@ -159,7 +161,18 @@ class OpcUaOutput:
 
     async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
         if self._inline and not self._mailbox and not self._draining:
-            self._show(device_id, samples)
+            # Applied in the call (the values set, the gateway's monitored items told, synchronously, as the
+            # drain would a moment later) without a mailbox entry and a drain wake-up per batch, and with no
+            # Python call between here and the address space (every poll tick with a change comes this
+            # way, a client or not). Items on asyncua's path are awaited by the drain, in order.
+            try:
+                slow = self._show_now(device_id, samples)
+            except Exception:
+                self.failures += 1
+                log.exception("OPC UA server could not apply kind=data machine=%s", device_id)
+                return
+            if slow:
+                self._post(("deliver", device_id, slow))
             return
         if len(self._mailbox) >= MAILBOX_LIMIT:
             self.dropped += len(samples)
@@ -173,20 +186,6 @@ class OpcUaOutput:
 
     async def device_offline(self, device_id: str) -> None:
         self._post(("offline", device_id))
-
-    def _show(self, device_id: str, samples: Sequence[Sample]) -> None:
-        """Apply a data batch right away (server on this loop, nothing queued before it): the values are
-        set and the gateway's monitored items told synchronously, as the drain would a moment later, without
-        a mailbox entry and a wake-up of the drain task per batch. Items on asyncua's path are awaited by
-        the drain, in order."""
-        try:
-            slow = self.server.show_data(device_id, samples)
-        except Exception:
-            self.failures += 1
-            log.exception("OPC UA server could not apply kind=data machine=%s", device_id)
-            return
-        if slow:
-            self._post(("deliver", device_id, slow))
 
     def _post(self, item: tuple[Any, ...]) -> None:
         self._mailbox.append(item)

@@ -54,6 +54,9 @@ class GatewayServer:
         self.server: Server | None = None
         self.space: GatewaySpace | None = None
         self.alarms: alarms.AlarmEvents | None = None
+        # machine_data without awaiting: what is left for asyncua's own monitored items (`deliver` it). The
+        # address space's `show` itself once started (the output calls it for every batch: no call between)
+        self.show_data: Callable[[str, Sequence[Sample]], list[Pending]] = self._not_started
 
     async def start(self) -> None:
         settings = self.settings
@@ -86,6 +89,7 @@ class GatewayServer:
         iserver.attribute_service = _GatewayAttributes(iserver.aspace, space, self._write)
         self.alarms = alarms.AlarmEvents(iserver, history_type.nodeid, namespace)
         self.space = space
+        self.show_data = space.show
         await server.start()
         self.server = server
         log.info("OPC UA server listening endpoint=%s security=%s anonymous=%s users=%d", settings.endpoint,
@@ -118,10 +122,9 @@ class GatewayServer:
         assert self.space is not None
         await self.space.update(device_id, samples)
 
-    def show_data(self, device_id: str, samples: Sequence[Sample]) -> list[Pending]:
-        """machine_data without awaiting: what is left for asyncua's own monitored items (`deliver` it)."""
-        assert self.space is not None
-        return self.space.show(device_id, samples)
+    @staticmethod
+    def _not_started(device_id: str, samples: Sequence[Sample]) -> list[Pending]:
+        raise RuntimeError("the OPC UA server is not started")
 
     async def machine_events(self, device_id: str, samples: Sequence[Sample]) -> None:
         assert self.space is not None and self.alarms is not None

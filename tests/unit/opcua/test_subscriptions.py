@@ -297,3 +297,21 @@ async def test_a_tapped_item_off_and_on_again_compares_with_the_value_it_last_sa
     assert await subscribed.publish() == []  # 6.0 again: nothing a client would see has changed
     await _feed(subscribed, _values("Macro/2", 6.0, ms=CNC_MS + 900) + _values("Macro/2", 7.0))
     assert await subscribed.publish() == [(61, 7.0, 0)]
+
+
+async def test_a_machine_nobody_watches_keeps_its_values_and_its_first_item_hears_the_next(
+        subscribed: Subscribed) -> None:
+    space = subscribed.space
+    second = Subscribed(space, f"m{next(_MACHINES)}", subscribed.subscription, subscribed.published)
+    space.machine_online(second.machine, SPECS, [], lambda _spec: False)
+    await subscribed.monitor("Macro/1", 61, queue_size=5)  # an item on the first machine only
+    await subscribed.publish()
+    await _feed(second, _values("Macro/1", 7.0))
+    assert subscribed.subscription._triggered_datachanges == {}
+    node = ua.NodeId(f"{second.machine}/Metrics/Macro/1", space.ns)
+    assert space.iserver.aspace.read_attribute_value(node, ua.AttributeIds.Value).Value.Value == 7.0
+    await second.monitor("Macro/1", 62, queue_size=5)
+    assert await second.publish() == [(62, 7.0, 0)]  # its first value: the one stored while nobody watched
+    await _feed(second, _values("Macro/1", 8.0) + _values("Macro/2", 8.0))
+    await _feed(subscribed, _values("Macro/1", 9.0))
+    assert await second.publish() == [(62, 8.0, 0), (61, 9.0, 0)]
