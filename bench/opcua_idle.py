@@ -14,31 +14,14 @@ import argparse
 import asyncio
 import cProfile
 import pstats
-import tempfile
 import time
-from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
-from bench.opcua_notify import CHANGED_PER_TICK, KINDS, _sample
+from bench.floor import DroppingSink
+from bench.opcua_notify import CHANGED_PER_TICK, _sample, metric_specs, server_settings
 from edge.opcua.output import OpcUaOutput
-from edge.opcua.settings import OpcUaSettings
-from edge.samples import MetricSpec, Sample
+from edge.samples import Sample
 from edge.service.outputs import Outputs
-
-
-class _NullPublisher:
-    async def device_online(self, device_id: str, specs: Sequence[MetricSpec], samples: Sequence[Sample]) -> None:
-        pass
-
-    async def device_data(self, device_id: str, samples: Sequence[Sample]) -> None:
-        pass
-
-    async def device_events(self, device_id: str, events: Sequence[Sample]) -> None:
-        pass
-
-    async def device_offline(self, device_id: str) -> None:
-        pass
 
 
 async def _feed(outputs: Outputs, batches: list[list[list[Sample]]], names: list[str]) -> float:
@@ -50,12 +33,10 @@ async def _feed(outputs: Outputs, batches: list[list[list[Sample]]], names: list
 
 
 async def measure(machines: int, metrics: int, ticks: int, rounds: int, profile: bool) -> dict[str, Any]:
-    settings = OpcUaSettings(state_dir=Path(tempfile.mkdtemp(prefix="opcua-idle-")), host="127.0.0.1", port=0,
-                             security=("None",), allow_anonymous=True)
-    output = OpcUaOutput(settings)
+    output = OpcUaOutput(server_settings("opcua-idle-"))
     await output.start()
     try:
-        specs = [MetricSpec(f"Macro/{i}", KINDS[i % len(KINDS)]) for i in range(metrics)]
+        specs = metric_specs(metrics)
         names = [f"m{m}" for m in range(machines)]
         now_ms = int(time.time() * 1000)
         for name in names:
@@ -67,7 +48,7 @@ async def measure(machines: int, metrics: int, ticks: int, rounds: int, profile:
         batches = [[[_sample(spec, tick, now_ms + tick) for spec in specs[(tick + m) % step::step]]
                     for m in range(machines)] for tick in range(1, ticks + 1)]
         cycles = machines * ticks
-        bare, served = Outputs(_NullPublisher()), Outputs(_NullPublisher(), [output])
+        bare, served = Outputs(DroppingSink()), Outputs(DroppingSink(), [output])
         without: list[float] = []
         with_server: list[float] = []
         profiler = cProfile.Profile() if profile else None

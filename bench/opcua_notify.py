@@ -40,13 +40,22 @@ class _Request:
         self.requesthdr = ua.RequestHeader()
 
 
+def server_settings(prefix: str) -> OpcUaSettings:
+    """An in-process server for counting: no security, anonymous, any free port, state in a fresh temp dir."""
+    return OpcUaSettings(state_dir=Path(tempfile.mkdtemp(prefix=prefix)), host="127.0.0.1", port=0,
+                         security=("None",), allow_anonymous=True)
+
+
+def metric_specs(metrics: int) -> list[MetricSpec]:
+    """`metrics` macros, their types cycling through KINDS."""
+    return [MetricSpec(f"Macro/{i}", KINDS[i % len(KINDS)]) for i in range(metrics)]
+
+
 async def measure(machines: int, metrics: int, ticks: int, profile: bool, client: bool = True) -> dict[str, Any]:
-    settings = OpcUaSettings(state_dir=Path(tempfile.mkdtemp(prefix="opcua-notify-")), host="127.0.0.1", port=0,
-                             security=("None",), allow_anonymous=True)
-    gateway = GatewayServer(settings)
+    gateway = GatewayServer(server_settings("opcua-notify-"))
     await gateway.start()
     try:
-        specs = [MetricSpec(f"Macro/{i}", KINDS[i % len(KINDS)]) for i in range(metrics)]
+        specs = metric_specs(metrics)
         now_ms = int(time.time() * 1000)
         for m in range(machines):
             await gateway.machine_online(f"m{m}", specs, [_sample(s, 0, now_ms) for s in specs], frozenset())
