@@ -196,9 +196,7 @@ class ClockProbes:
             self._verified = verified
             self._kind, earliest = ProbeKind.VERIFY, verified + self.verify_every_s
             aim = self._side * (uncertainty + half_rtt + VERIFY_MARGIN_S)
-        earliest = max(earliest, now + LEAD_S + half_rtt)
-        if self._tokens < 1.0 and self._tokens_at is not None:  # the budget is spent (_budget_ready)
-            earliest = max(earliest, self._budget_ready())
+        earliest = max(earliest, now + LEAD_S + half_rtt, self._budget_ready())
         if self._kind is ProbeKind.NARROW and self.calendar is not None:
             return self._booked_narrowing(earliest, offset, uncertainty) - half_rtt
         return self._flip_after(earliest, offset, aim) - half_rtt
@@ -227,8 +225,7 @@ class ClockProbes:
         """The first gateway moment at or after `earliest` that is `aim` seconds from a predicted CNC second
         flip (the CNC shows second N from `N - offset` on), skipping the CNC's midnight."""
         second = math.ceil(earliest + offset - aim)
-        asked, answer = self._clear  # _clear_of_midnight's kept answer, checked here: a plan a CNC second
-        return (answer if second == asked else self._clear_of_midnight(second)) - offset + aim
+        return self._clear_of_midnight(second) - offset + aim
 
     def _clear_of_midnight(self, second: int) -> int:
         """The first CNC second from `second` on that is not within MIDNIGHT_GUARD_S of its midnight. The last
