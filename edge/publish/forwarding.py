@@ -61,11 +61,8 @@ class Outbox:
     def __len__(self) -> int:
         return len(self._entries)
 
-    def record(self, batch: HeldBatch) -> None:
-        self.add(batch.device_id, batch.kind, batch.samples)
-
     def add(self, device_id: str, kind: str, samples: Sequence[Sample]) -> None:
-        """record, for the parts of a batch (the live path: no HeldBatch built)."""
+        """Remember a sent batch (one device's samples of one kind) by its parts: no HeldBatch built."""
         self._entries.append((self._next, device_id, kind, samples))
         self._next += 1
 
