@@ -255,20 +255,28 @@ def tick_features(groups: Any, samples: int, moved: int, news: bool) -> list[flo
 
 
 def fit_cost_model(rows: list[list[float]], times: list[float]) -> dict[str, float]:
-    """Least squares of each tick's time over its FEATURES (a feature that never varies gets no column)."""
+    """Least squares of each tick's time over its FEATURES. A feature that never varies gets no column, nor
+    does one the ticks cannot tell apart from the features before it (in a short recording two features may
+    move together on every tick): its time goes to those."""
     used = [j for j in range(len(FEATURES)) if j == 0 or len({row[j] for row in rows}) > 1]
     a = [[sum(r[i] * r[j] for r in rows) for j in used] for i in used]
     b = [sum(r[i] * t for r, t in zip(rows, times, strict=True)) for i in used]
     m = len(used)
+    tiny = 1e-9 * max((abs(a[i][i]) for i in range(m)), default=1.0)
+    pivots: list[tuple[int, int]] = []  # (row, column) of each column that gets a coefficient
     for col in range(m):  # Gauss-Jordan on the normal equations (a handful of columns)
-        pivot = max(range(col, m), key=lambda r: abs(a[r][col]))
-        a[col], a[pivot], b[col], b[pivot] = a[pivot], a[col], b[pivot], b[col]
+        row = len(pivots)
+        pivot = max(range(row, m), key=lambda r: abs(a[r][col]), default=row)
+        if pivot >= m or abs(a[pivot][col]) <= tiny:
+            continue  # a combination of the columns before it: no coefficient of its own
+        a[row], a[pivot], b[row], b[pivot] = a[pivot], a[row], b[pivot], b[row]
         for r in range(m):
-            if r != col:
-                f = a[r][col] / a[col][col]
-                a[r] = [x - f * y for x, y in zip(a[r], a[col], strict=True)]
-                b[r] -= f * b[col]
-    return {FEATURES[j]: b[i] / a[i][i] for i, j in enumerate(used)}
+            if r != row:
+                f = a[r][col] / a[row][col]
+                a[r] = [x - f * y for x, y in zip(a[r], a[row], strict=True)]
+                b[r] -= f * b[row]
+        pivots.append((row, col))
+    return {FEATURES[used[col]]: b[row] / a[row][col] for row, col in pivots}
 
 
 def print_cost_model(rows: list[list[float]], times: list[float]) -> None:

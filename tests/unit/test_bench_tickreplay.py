@@ -38,3 +38,13 @@ def test_a_replay_timed_per_tick_describes_every_replayed_tick() -> None:
     ticks = asyncio.run(tickreplay._replay(recording, 2, 1, "default", per_tick=True))
     assert len(ticks["rows"]) == len(ticks["us"]) == 2 * len(recording["ticks"])
     assert all(row[0] == 1.0 and row[1] >= 0 and row[2] >= 1 for row in ticks["rows"])  # the stamp macro moves
+
+
+def test_the_cost_model_gives_features_that_move_together_one_coefficient() -> None:
+    # a short recording: servo loads, counters and the clock's second read on the same ticks only
+    rows = [[1.0, float(samples), float(moved), flag, flag, flag]
+            for samples in (3, 9, 17) for moved in (2, 5) for flag in (0.0, 1.0)]
+    times = [30.0 + 1.5 * r[1] + 2.0 * r[2] + 24.0 * r[3] for r in rows]
+    fitted = tickreplay.fit_cost_model(rows, times)
+    assert list(fitted) == ["fixed", "published value", "moved read", "servo loads read"]
+    assert [round(v, 6) for v in fitted.values()] == [30.0, 1.5, 2.0, 24.0]
