@@ -69,8 +69,9 @@ def nobody_answered(error: BaseException) -> bool:
 
 def answer_to_error(error: BaseException) -> Answer:
     """A connect attempt that raised: nobody there, a peer that accepted and then reset or closed the
-    connection (TLS included: an EOF is not a certificate problem), or a rejection (a name that does not
-    resolve, a TLS failure, anything else)."""
+    connection (during the TLS handshake too: a proxy in front of a broker that is down; a broker refusing
+    the client certificate sends an alert here, or ends the session after the handshake: tls_refused), or a
+    rejection (a name that does not resolve, a TLS failure, anything else)."""
     if nobody_answered(error):
         return Answer.NOBODY
     if isinstance(error, ConnectionResetError | ConnectionAbortedError | BrokenPipeError | ssl.SSLEOFError
@@ -79,12 +80,28 @@ def answer_to_error(error: BaseException) -> Answer:
     return Answer.REJECTED
 
 
-def answer_to_close(cause: str) -> Answer:
-    """A connection closed before its CONNACK (`cause`: paho's first error, or the disconnect reason): a
-    broker, or a proxy in front of one, that is not serving; unless the cause is a TLS alert or a refused
-    login (a client certificate the broker requires), which a retry does not fix."""
+# How a peer's abortive close reads in paho's error: an SSL EOF (no close_notify), a reset, a broken pipe.
+_ABORTED = ("eof occurred in violation of protocol", "unexpected eof", "connection reset", "broken pipe")
+
+
+def tls_refused(cause: str, tls: bool) -> bool:
+    """On a TLS link, a session closed before its CONNACK by a TLS alert, or aborted (an EOF without
+    close_notify, a reset). The broker's TLS stack had finished its side of the handshake, so a broker is
+    there and serving TLS: what it turned down is this client. With TLS 1.3 a broker that requires a client
+    certificate checks it only after the client has finished its handshake and sent CONNECT, and its alert
+    is mostly lost to the close: the client reads an EOF (or a reset), rarely the alert. A broker that is
+    down or restarting refuses the TCP connect, or closes during the handshake (edge.publish.mqtt raises
+    that in the connect itself: answer_to_error)."""
     text = cause.lower()
-    if classify(cause) == NOT_AUTHORISED or "alert" in text or "certificate" in text:
+    return tls and ("alert" in text or any(words in text for words in _ABORTED))
+
+
+def answer_to_close(cause: str, tls: bool = False) -> Answer:
+    """A connection closed before its CONNACK (`cause`: paho's first error, or the disconnect reason): a
+    broker, or a proxy in front of one, that is not serving; unless the cause is a TLS alert, a TLS session
+    the broker aborted (`tls`: the link is TLS; tls_refused) or a refused login, which a retry does not fix."""
+    text = cause.lower()
+    if classify(cause) == NOT_AUTHORISED or "alert" in text or "certificate" in text or tls_refused(cause, tls):
         return Answer.REJECTED
     return Answer.NOT_SERVING
 

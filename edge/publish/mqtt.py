@@ -536,7 +536,7 @@ class MqttConnection:
         if not self.connected and not self._attempt_reported:
             # Closed before CONNACK: say what the attempt met now, before the supervisor (woken by the
             # socket's close) draws the next delay; the line is logged on the loop (_loop_disconnected).
-            self._answer = answer_to_close(self._attempt_error or str(reason))
+            self._answer = answer_to_close(self._attempt_error or str(reason), self._settings.tls)
         self._defer(self._loop_disconnected, str(reason))
 
     def _paho_message(self, client: paho.Client, userdata: object, message: paho.MQTTMessage) -> None:
@@ -590,9 +590,9 @@ class MqttConnection:
 
     def _loop_disconnected(self, reason: str) -> None:
         if not self.connected and not self._attempt_reported and self._client is not None:
-            # Closed between CONNECT and CONNACK: a broker refusing at the TLS layer (no client
-            # certificate) looks like this; say why, as a refused password is said.
-            self._attempt_failed("connection closed before CONNACK", self._attempt_error or reason)
+            # Closed between CONNECT and CONNACK (a broker refusing our certificate): said as a bad password is.
+            cause = self._attempt_error or reason
+            self._attempt_failed(*connect_failure.closed_before_connack(cause, self._settings.tls))
         if self.connected:
             stopping = self._client is None  # stop() clears it first: a disconnect we asked for
             if not stopping:

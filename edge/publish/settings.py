@@ -46,7 +46,8 @@ class PublishSettings:
     # Cap of the delay while the broker's address accepts the TCP connect but does not serve (closed or reset
     # before CONNACK, or CONNACK "server unavailable/busy": a proxy or load balancer in front of a broker that
     # is down, a broker still starting); each delay is drawn in [cap/2, cap], so at most one attempt a second
-    # at the default, and a broker serving again is reached within the cap.
+    # at the default, and a broker serving again is reached within the cap. A TLS session the broker ended
+    # after its handshake is not this but a refused client certificate (broker_trouble.tls_refused).
     reconnect_not_serving_s: float = 2.0
     rebirth_min_interval_s: float = 1.0  # rebirth requests inside this window after a rebirth coalesce
     connect_timeout_s: float = 10.0  # SUBACK wait before a session is considered broken

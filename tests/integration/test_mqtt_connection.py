@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 import os
 import random
 import re
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ from edge.publish import Publisher, PublishSettings, mqtt_wire
 from edge.publish.mqtt import RAW_WRITE_BYTES, MqttConnection, backoff_delay
 from tests.helpers import Mosquitto, async_wait_for, mosquitto_binary
 from tests.integration.mqtt_observer import Observer
+from tests.integration.tcp_relay import TcpRelay
 
 pytestmark = pytest.mark.integration
 
@@ -37,16 +39,20 @@ def openssl(*args: str, cwd: Path) -> None:
 
 @pytest.fixture(scope="module")
 def pki(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A throwaway CA, a server certificate for 127.0.0.1 and a client certificate."""
+    """A throwaway CA, a server certificate for 127.0.0.1 and a client certificate; and a client certificate
+    of another CA ("stranger"), which the broker does not accept."""
     d = tmp_path_factory.mktemp("pki")
-    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.crt",
-            "-days", "2", "-subj", "/CN=test-ca", cwd=d)
-    for name, extra in (("server", "subjectAltName=IP:127.0.0.1"), ("client", "extendedKeyUsage=clientAuth")):
+    for ca in ("ca", "other-ca"):
+        openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{ca}.key", "-out", f"{ca}.crt",
+                "-days", "2", "-subj", f"/CN=test-{ca}", cwd=d)
+    for name, ca, extra in (("server", "ca", "subjectAltName=IP:127.0.0.1"),
+                            ("client", "ca", "extendedKeyUsage=clientAuth"),
+                            ("stranger", "other-ca", "extendedKeyUsage=clientAuth")):
         openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out", f"{name}.csr",
                 "-subj", f"/CN={name}", cwd=d)
         (d / f"{name}.ext").write_text(extra + "\n")
-        openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.crt", "-CAkey", "ca.key", "-CAcreateserial",
-                "-out", f"{name}.crt", "-days", "2", "-extfile", f"{name}.ext", cwd=d)
+        openssl("x509", "-req", "-in", f"{name}.csr", "-CA", f"{ca}.crt", "-CAkey", f"{ca}.key",
+                "-CAcreateserial", "-out", f"{name}.crt", "-days", "2", "-extfile", f"{name}.ext", cwd=d)
     return d
 
 
@@ -144,6 +150,90 @@ async def test_tls_verification_failure_is_a_warning_with_the_cause(tls_broker: 
     assert "TLS handshake failed" in first and "certificate verify failed" in first, first
     assert "mqtt.tls.ca_file" in first, first
     assert not [r for r in caplog.records if r.levelno < logging.WARNING and "certificate" in r.getMessage()]
+
+
+class AttemptTimes:
+    """A condition for async_wait_for (the count of failed attempts) that notes the loop time at which each
+    was seen: the retry delays as the connection's status shows them, polled every 10 ms."""
+
+    def __init__(self, attempts: Callable[[], int]) -> None:
+        self._attempts = attempts
+        self.times: list[float] = []
+
+    def __call__(self) -> int:
+        now = asyncio.get_running_loop().time()
+        self.times.extend([now] * (self._attempts() - len(self.times)))
+        return len(self.times)
+
+    def gaps(self) -> list[float]:
+        return [round(b - a, 3) for a, b in itertools.pairwise(self.times)]
+
+
+@pytest.mark.parametrize("client_cert", ["none", "of another CA"])
+async def test_a_broker_refusing_the_client_certificate_is_retried_with_the_growing_backoff_and_said_once(
+        tls_broker: Mosquitto, pki: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, client_cert: str) -> None:
+    """`require_certificate true`. With TLS 1.3 the broker checks the client certificate after the client has
+    finished its handshake and sent CONNECT, and the client mostly reads only an EOF (the alert is lost to the
+    close): still a refusal on the merits, retried with the backoff growing to `reconnect_max_s`, not every
+    `reconnect_not_serving_s` for ever as a broker that accepts and does not serve is. One WARNING naming it."""
+    caplog.set_level(logging.DEBUG, logger="edge.publish.mqtt")
+    cert = {} if client_cert == "none" else {"tls_cert_file": pki / "stranger.crt",
+                                             "tls_key_file": pki / "stranger.key"}
+    cap, not_serving = 4.0, 1.0
+    pub = Publisher(settings(tls_broker, tmp_path, tls=True, tls_ca_file=pki / "ca.crt",
+                             formats=frozenset({"sparkplug"}), reconnect_min_s=0.5, reconnect_max_s=cap,
+                             reconnect_not_serving_s=not_serving, **cert))
+
+    def failed_attempts() -> int:
+        (_, state), = pub.broker_states()
+        return state.failed_attempts
+
+    seen = AttemptTimes(failed_attempts)
+    await pub.start()
+    try:
+        await async_wait_for(lambda: seen() >= 7, timeout=60, message="seven refused TLS sessions")
+        (_, state), = pub.broker_states()
+        assert not state.connected and state.reason == "TLS", state
+    finally:
+        await pub.stop()
+    waited = seen.gaps()
+    floors = [min(cap, 0.5 * 2 ** i) / 2 for i in range(len(waited))]  # 0.25, 0.5, 1, 2, 2, 2: drawn in [c/2, c]
+    assert all(w >= floor - 0.1 for w, floor in zip(waited, floors, strict=True)), (waited, floors)
+    assert all(w <= cap + 1.5 for w in waited), waited  # capped (+ the attempt's own handshake)
+    assert min(waited[3:]) > not_serving + 0.5, waited  # not the "accepted, not serving" retry
+    assert attempts_logged(caplog, "TLS handshake failed (the broker closed the session before CONNACK)") >= 7
+    warnings = broker_warnings(caplog, f"{tls_broker.host}:{tls_broker.port}")
+    assert len(warnings) == 1, warnings  # then one a minute (this test is shorter): tests/unit test_broker_trouble
+    assert "TLS handshake failed" in warnings[0] and "reason=TLS" in warnings[0], warnings[0]
+    assert "client certificate" in warnings[0] and "mqtt.tls.cert_file" in warnings[0], warnings[0]
+
+
+async def test_a_tls_address_that_accepts_and_closes_keeps_the_short_retry_and_connects_once_it_serves(
+        tls_broker: Mosquitto, pki: Path) -> None:
+    """A proxy in front of a TLS broker that is down closes during the handshake (the connect itself fails): not
+    a refusal on the merits, so it is retried within `reconnect_not_serving_s`; only a session whose handshake
+    the broker finished and then ended before CONNACK is one."""
+    relay = TcpRelay(tls_broker.host, tls_broker.port)
+    await relay.start()
+    relay.accepting = False
+    not_serving = 1.0
+    s = PublishSettings(host=relay.host, port=relay.port, keepalive=5, reconnect_min_s=0.5, reconnect_max_s=30.0,
+                        reconnect_not_serving_s=not_serving, tls=True, tls_ca_file=pki / "ca.crt",
+                        tls_cert_file=pki / "client.crt", tls_key_file=pki / "client.key")
+    conn = MqttConnection(s, "tls-not-serving", before_connect=lambda unsent: None, on_connected=lambda tag: None,
+                          on_disconnected=lambda: None, on_message=lambda msg: None)
+    seen = AttemptTimes(lambda: conn.trouble.failed_attempts)
+    conn.start()
+    try:
+        await async_wait_for(lambda: seen() >= 6, timeout=30, message="six attempts turned away")
+        waited = seen.gaps()
+        assert all(w <= not_serving + 0.5 for w in waited), waited  # the backoff would be at 4-8 s by the last
+        assert conn.trouble.reason != "not authorised" and not conn.connected
+        relay.accepting = True
+        await async_wait_for(lambda: conn.connected, timeout=not_serving + 2.0, message="TLS session via the relay")
+    finally:
+        await conn.stop()
+        await relay.close()
 
 
 async def test_username_password(auth_broker: Mosquitto, tmp_path: Path) -> None:

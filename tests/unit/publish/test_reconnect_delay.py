@@ -69,6 +69,17 @@ def test_what_a_failed_attempt_met() -> None:
     assert answer_to_close("failed to receive on socket: [Errno 104] Connection reset by peer") is Answer.NOT_SERVING
     assert answer_to_close("failed to receive on socket: [SSL: TLSV13_ALERT_CERTIFICATE_REQUIRED] tlsv13 alert "
                            "certificate required") is Answer.REJECTED
+    # On a TLS link the broker finished its handshake: an aborted session before CONNACK is the broker refusing
+    # this client (TLS 1.3 checks the client certificate after the client's handshake; the alert is mostly
+    # lost to the close), not a broker that is restarting; a clean close stays "not serving".
+    eof = "failed to receive on socket: EOF occurred in violation of protocol (_ssl.c:2427)"
+    reset = "failed to receive on socket: [Errno 104] Connection reset by peer"
+    assert answer_to_close(eof, tls=True) is Answer.REJECTED
+    assert answer_to_close(reset, tls=True) is Answer.REJECTED
+    assert answer_to_close(reset, tls=False) is Answer.NOT_SERVING
+    assert answer_to_close("Unspecified error", tls=True) is Answer.NOT_SERVING
+    # During the handshake (the connect raised): a TLS proxy in front of a broker that is down, still fast.
+    assert answer_to_error(ConnectionResetError(errno.ECONNRESET, "reset")) is Answer.NOT_SERVING
     # CONNACK refusals: server unavailable (3.1.1's 3 as paho reports it) and busy pass; a bad login does not.
     assert answer_to_connack(0x88) is Answer.NOT_SERVING and answer_to_connack(0x89) is Answer.NOT_SERVING
     assert answer_to_connack(0x86) is Answer.REJECTED and answer_to_connack(0x87) is Answer.REJECTED
