@@ -29,7 +29,16 @@ from asyncua.server.internal_server import InternalServer
 from edge.opcua import layout, nodes
 from edge.opcua.encoding import MAX_MS, MIN_MS, TICKS_PER_MS, WIN_EPOCH_OFFSET_MS
 from edge.opcua.shared_attributes import SharedAttributes
-from edge.opcua.subscriptions import CHANGES, GatewayMonitoredItems, Tap, enqueue, link, taps_of, unlink
+from edge.opcua.subscriptions import (
+    CHANGES,
+    GatewayMonitoredItems,
+    Tap,
+    enqueue,
+    link,
+    queue_more,
+    taps_of,
+    unlink,
+)
 from edge.opcua.values import (
     KINDS,
     NULL_TYPE,
@@ -363,11 +372,9 @@ class GatewaySpace:
                     queue = subscription._triggered_datachanges
                     pending = queue.get(mid)
                     if pending is None:
-                        queue[mid] = [prefix + encoded]
+                        queue[mid] = prefix + encoded  # bare (subscriptions.enqueue)
                     else:
-                        if len(pending) >= bound:
-                            del pending[0]
-                        pending.append(prefix + encoded)
+                        queue_more(queue, mid, pending, prefix + encoded, bound)
             if slot.others:
                 value = slot.read()
                 for handle, callback in slot.others:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Collection, Sequence
 from functools import partial
-from itertools import chain
 
 from asyncua import ua
 from asyncua.ua.ua_binary import Primitives, struct_to_binary
@@ -131,14 +130,18 @@ def note_bytes(note: object) -> bytes:
     return _HANDLE.pack(client_handle) + data_value_bytes(value)
 
 
-def data_change_of_notes(queues: Collection[list[object]]) -> ua.ExtensionObject:
-    """The DataChangeNotification of every item's queued changes (`note_bytes`), in order. When all are
-    pre-encoded (the usual case) the body is one join, with no Python step per notification."""
-    count = sum(map(len, queues))
+def data_change_of_notes(queues: Collection[object]) -> ua.ExtensionObject:
+    """The DataChangeNotification of every item's queued changes, in order: an item's one bytes notification
+    queued bare (edge.opcua.subscriptions.enqueue), or a list of them (`note_bytes`). When every item has one
+    bare notification (the usual case) the body is one join, with no Python step per notification."""
     try:
-        body = b"".join(chain.from_iterable(queues))  # type: ignore[arg-type]
-    except TypeError:  # some change is not pre-encoded (an item on asyncua's path)
-        body = b"".join(note_bytes(note) for notes in queues for note in notes)
+        body = b"".join(queues)  # type: ignore[arg-type]
+        count = len(queues)
+    except TypeError:  # an item with several changes, or one not pre-encoded (an item on asyncua's path)
+        notes = [note_bytes(note) for queued in queues
+                 for note in ((queued,) if type(queued) is bytes else queued)]  # type: ignore[attr-defined]
+        body = b"".join(notes)
+        count = len(notes)
     return ua.ExtensionObject(TypeId=_DATA_CHANGE_TYPE, Body=_COUNT.pack(count) + body + _EMPTY_DIAGNOSTICS)
 
 

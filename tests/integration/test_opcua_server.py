@@ -23,6 +23,7 @@ from asyncua import Client, ua  # noqa: E402
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noqa: E402
 
 from edge.opcua.output import OpcUaOutput  # noqa: E402
+from edge.opcua.processor import GatewayProcessor  # noqa: E402
 from edge.opcua.security import ensure_certificate  # noqa: E402
 from edge.opcua.server import MetricWrite  # noqa: E402
 from edge.opcua.settings import OpcUaSettings  # noqa: E402
@@ -210,6 +211,9 @@ async def test_subscription_gets_each_change_and_offline_reads_bad(served: Serve
         target = await node(client, "m1/Monitoring/Axes/X/Absolute")
         await subscription.subscribe_data_change(target, queuesize=10)
         await async_wait_for(lambda: seen, message="the initial value")
+        server = served.output.server.server
+        assert server is not None and server.bserver is not None  # its Publish requests served first (processor)
+        assert {type(connection.processor) for connection in server.bserver.clients} == {GatewayProcessor}
         for step in range(1, 4):
             await served.output.device_data("m1", [Sample("Axis/X/Absolute", 12.5 + step, MetricType.DOUBLE,
                                                           CNC_MS + 1000 * step)])

@@ -131,6 +131,8 @@ def test_queued_notes_make_asyncuas_notification_whatever_their_form() -> None:
         MonitoredItems=[ua.MonitoredItemNotification(ClientHandle=h, Value=v) for h, v in pairs]))
     encoded = [encoding.handle_prefix(h) + encoding.data_value_bytes(v) for h, v in pairs]
     assert extensionobject_to_binary(encoding.data_change_of_notes([encoded[:3], encoded[3:]])) == theirs
+    assert extensionobject_to_binary(encoding.data_change_of_notes(encoded)) == theirs  # each queued bare
+    assert extensionobject_to_binary(encoding.data_change_of_notes([encoded[0], encoded[1:4], *encoded[4:]])) == theirs
     mixed: list[list[object]] = [[encoded[0], pairs[1]], [ua.MonitoredItemNotification(ClientHandle=h, Value=v)
                                                           for h, v in pairs[2:]]]
     assert extensionobject_to_binary(encoding.data_change_of_notes(mixed)) == theirs

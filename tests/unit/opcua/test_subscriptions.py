@@ -103,6 +103,16 @@ async def _feed(subscribed: Subscribed, batches: list[list[Sample]]) -> None:
         await subscribed.space.update(subscribed.machine, batch)
 
 
+def _give_deadband(subscribed: Subscribed, mid: int, handle: int, deadband: float) -> None:
+    """ModifyMonitoredItems: the item gets an absolute deadband (and so leaves its tap for asyncua's path)."""
+    flt = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValue, DeadbandType=ua.DeadbandType.Absolute,
+                              DeadbandValue=deadband)
+    modify = ua.MonitoredItemModifyRequest(MonitoredItemId=mid, RequestedParameters=ua.MonitoringParameters(
+        ClientHandle=handle, QueueSize=10, Filter=flt))
+    subscribed.subscription.monitored_item_srv.modify_monitored_items(
+        ua.ModifyMonitoredItemsParameters(ItemsToModify=[modify]))
+
+
 async def test_each_item_keeps_its_queue_size_of_latest_values(subscribed: Subscribed) -> None:
     await subscribed.monitor("Macro/0", 10, queue_size=1)
     await subscribed.monitor("Macro/1", 11, queue_size=3)
@@ -206,14 +216,19 @@ async def test_an_item_given_a_deadband_later_leaves_the_short_path(subscribed: 
     await subscribed.publish()
     await _feed(subscribed, _values("Macro/2", 1.0, 2.0))
     assert await subscribed.publish() == [(31, 1.0, 0), (31, 2.0, 0)]
-    deadband = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValue,
-                                   DeadbandType=ua.DeadbandType.Absolute, DeadbandValue=5.0)
-    modify = ua.MonitoredItemModifyRequest(MonitoredItemId=mid, RequestedParameters=ua.MonitoringParameters(
-        ClientHandle=31, QueueSize=10, Filter=deadband))
-    subscribed.subscription.monitored_item_srv.modify_monitored_items(
-        ua.ModifyMonitoredItemsParameters(ItemsToModify=[modify]))
+    _give_deadband(subscribed, mid, 31, 5.0)
     await _feed(subscribed, _values("Macro/2", 3.0, 10.0, 12.0))  # deltas 1, 7, 2 from the value before
     assert await subscribed.publish() == [(31, 10.0, 0)]
+
+
+async def test_a_change_queued_by_its_tap_then_one_by_asyncuas_path_both_arrive_in_order(
+        subscribed: Subscribed) -> None:
+    mid = await subscribed.monitor("Macro/1", 61, queue_size=10)
+    await subscribed.publish()
+    await _feed(subscribed, _values("Macro/1", 1.0))  # queued by the tap (bare, not in a list)
+    _give_deadband(subscribed, mid, 61, 5.0)
+    await _feed(subscribed, _values("Macro/1", 9.0, ms=CNC_MS + 10))  # asyncua's path, into the same queue
+    assert await subscribed.publish() == [(61, 1.0, 0), (61, 9.0, 0)]
 
 
 async def test_a_modified_queue_size_bounds_the_next_changes(subscribed: Subscribed) -> None:
