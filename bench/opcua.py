@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import statistics
 import subprocess
 import tempfile
@@ -29,6 +30,7 @@ from bench.fleet import (
     FleetOptions,
     _window,
     config_text,
+    read_diagnosis,
     start_fleet_sims,
     wait_until,
 )
@@ -40,6 +42,9 @@ from bench.workload import STAMP_MACRO
 from tests.helpers import Mosquitto, free_port, mosquitto_binary
 
 MODES = ("off", "thread", "loop")
+# --diagnose: the runner of each mode's daemon (bench.latency_daemon's probes; with the server on, every
+# request's holds of the loop too), by default bench.latency_daemon
+_DIAGNOSE_MODULES = {"ballast": "bench.opcua_ballast", "thread": "bench.opcua_holds", "loop": "bench.opcua_holds"}
 # "idle": the server on the daemon's loop with its address space built but no client; "ballast": the server
 # off, the daemon holding an inert heap as large as the server's (bench.opcua_ballast): what the heap alone
 # costs (asked for with --modes, not run by default)
@@ -130,7 +135,7 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
                           + opcua_section(mode, opcua_port, password))
         diagnosis = workdir / "diagnosis.json" if diagnose else None
         daemon = DaemonProcess(config, workdir / "daemon.log", profile_to=profile_to, diagnose_to=diagnosis,
-                               module="bench.opcua_ballast" if mode == "ballast" else None)
+                               module=_DIAGNOSE_MODULES.get(mode))
         sub, proc = subscriber, daemon.proc
         wait_until(lambda: len(sub.births) >= machines or proc.poll() is not None, 30 + machines * 0.2,
                    f"DBIRTH of {machines} machines")
@@ -167,7 +172,13 @@ def run_mode(mode: str, machines: int, duration_s: float, warmup_s: float,
                 measured["client_wait_p99_ms"] = percentile([v / 1000 for v in seen["wait_ms"]], 99) * 1000
             measured["client_sample_p50_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 50) * 1000
             measured["client_sample_p99_ms"] = percentile([v / 1000 for v in seen["sample_ms"]], 99) * 1000
+            if diagnosis is not None:
+                daemon.proc.send_signal(signal.SIGUSR1)  # the probes' window: the burst alone
             measured.update(burst(client, subscriber))
+            if diagnosis is not None:  # the loop's lag over the burst; the requests' holds since the start
+                after = read_diagnosis(daemon, diagnosis)
+                measured["burst_loop_lag"] = after["loop_lag"]
+                measured["holds"] = after.get("holds", {})
         measured["mode"] = mode
         return measured
     finally:
@@ -242,6 +253,12 @@ def run(quick: bool = False, machines: int | None = None, duration_s: float | No
                   f"{run_.get('client_sample_p99_ms', float('nan')):.0f} ms)", flush=True)
             if "diagnosis" in run_:
                 print(f"  opcua {mode:<6} {diagnosis_summary(run_, machines)}", flush=True)
+            if "holds" in run_:
+                lag = run_["burst_loop_lag"]
+                print(f"  opcua {mode:<6} burst loop lag p99 {lag.get('p99_ms', 0):.0f} ms max "
+                      f"{lag.get('max_ms', 0):.0f} ms; longest holds: " + "; ".join(
+                          f"{key} {hold['top5_cpu_ms']} ms CPU ({hold['steps']} steps)"
+                          for key, hold in list(run_["holds"].items())[:6]), flush=True)
             rows.setdefault(mode, {"mode": mode, "machines": machines, "runs": []})["runs"].append(run_)
     for row in rows.values():
         runs = row.pop("runs")

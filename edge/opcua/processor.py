@@ -6,7 +6,8 @@ to tell session-less services. Publish comes 25th: about 30 NodeIds built and co
 for every Publish request, of which a client subscribed to the fleet sends one per publishing interval
 (50 a second at 20 ms). Publish is checked first here and served as asyncua serves it (its checks of the
 session and the user's permission, its activity stamps, then its Publish branch, asyncua 2.1); every other
-request goes through asyncua's own dispatch unchanged.
+request goes through edge.opcua.large_responses (a large result list encoded in slices), then asyncua's own
+dispatch.
 
 `install` makes asyncua's binary server create GatewayProcessors for new connections (once per process).
 """
@@ -18,14 +19,17 @@ from typing import Any
 
 from asyncua import ua
 from asyncua.server import binary_server_asyncio
-from asyncua.server.uaprocessor import PublishRequestData, UaProcessor
+from asyncua.server.uaprocessor import PublishRequestData
 from asyncua.ua.ua_binary import struct_from_binary
+
+from edge.opcua.large_responses import SlicedResponses
 
 _PUBLISH = ua.NodeId(ua.ObjectIds.PublishRequest_Encoding_DefaultBinary)
 
 
-class GatewayProcessor(UaProcessor):
-    """asyncua's processor of one connection's messages, with Publish dispatched first."""
+class GatewayProcessor(SlicedResponses):
+    """asyncua's processor of one connection's messages, with Publish dispatched first (other requests:
+    edge.opcua.large_responses, then asyncua)."""
 
     async def _process_message(self, typeid: ua.NodeId, requesthdr: ua.RequestHeader, seqhdr: Any,
                                body: Any) -> bool:

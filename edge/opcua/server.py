@@ -18,7 +18,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AttributeService
 
-from edge.opcua import alarms, layout, processor, subscriptions
+from edge.opcua import alarms, layout, processor, subscriptions, views
 from edge.opcua.address_space import GatewaySpace, Pending
 from edge.opcua.security import PasswordUsers, ensure_certificate
 from edge.opcua.settings import SECURITY_MODES, OpcUaSettings
@@ -84,7 +84,8 @@ class GatewayServer:
         history_type = await server.create_custom_event_type(
             namespace, alarms.HISTORY_EVENT_TYPE, ua.ObjectIds.BaseEventType, list(alarms.HISTORY_FIELDS))
         subscriptions.install(iserver.subscription_service)
-        processor.install()
+        views.install(iserver)  # a browse of the whole tree: no walk of the reference types per reference
+        processor.install()  # Publish dispatched first; large result lists encoded with the loop given turns
         space = GatewaySpace(iserver, namespace)
         space.setup()
         iserver.attribute_service = _GatewayAttributes(iserver.aspace, space, self._write)

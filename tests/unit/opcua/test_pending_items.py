@@ -57,3 +57,27 @@ def test_a_null_or_empty_item_array_is_no_item_and_other_types_decode_as_before(
     assert len(struct_from_binary(ua.CreateMonitoredItemsParameters, Buffer(null)).ItemsToCreate) == 0
     modify = ua.ModifyMonitoredItemsParameters(SubscriptionId=3, ItemsToModify=[ua.MonitoredItemModifyRequest()])
     assert struct_from_binary(ua.ModifyMonitoredItemsParameters, Buffer(struct_to_binary(modify))) == modify
+
+
+def test_browse_read_and_translate_requests_decode_on_demand_as_asyncua_decodes_them() -> None:
+    pending_items.install()
+    nodes = [ua.NodeId(f"m{index}/Metrics", 2) for index in range(7)]
+    browse = ua.BrowseParameters(RequestedMaxReferencesPerNode=5, NodesToBrowse=[ua.BrowseDescription(
+        NodeId=node, ReferenceTypeId=ua.NodeId(ua.ObjectIds.HierarchicalReferences), ResultMask=63)
+        for node in nodes])
+    read = ua.ReadParameters(MaxAge=250.0, TimestampsToReturn=ua.TimestampsToReturn.Source,
+                             NodesToRead=[ua.ReadValueId(NodeId=node, AttributeId=ua.AttributeIds.Value)
+                                          for node in nodes])
+    translate = ua.TranslateBrowsePathsToNodeIdsParameters(BrowsePaths=[ua.BrowsePath(
+        StartingNode=node, RelativePath=ua.RelativePath(Elements=[ua.RelativePathElement(
+            TargetName=ua.QualifiedName("Axis", 2))])) for node in nodes])
+    for sent, field in ((browse, "NodesToBrowse"), (read, "NodesToRead"), (translate, "BrowsePaths")):
+        encoded = struct_to_binary(sent)
+        got = struct_from_binary(type(sent), Buffer(encoded))
+        pending = getattr(got, field)
+        assert isinstance(pending, pending_items.PendingItems)
+        assert pending.take(3) == getattr(sent, field)[:3]  # the first slice, the rest still encoded
+        assert list(pending) == getattr(sent, field)
+        setattr(got, field, list(pending))
+        assert got == sent
+        assert struct_to_binary(got) == encoded
