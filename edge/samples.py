@@ -67,9 +67,6 @@ class MetricSpec:
 
 SAMPLE_FIELDS = ("name", "value", "type", "timestamp_ms", "quality", "historical")
 
-# Each Sample field's slot setter, in field order (for what sets one field of a Sample it has built).
-SAMPLE_SLOT_SETTERS = tuple(getattr(Sample, name).__set__ for name in SAMPLE_FIELDS)
-
 
 _new = object.__new__
 
