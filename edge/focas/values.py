@@ -60,6 +60,9 @@ def decode_scaled(data: bytes, offset: int = 0, *, strict: bool = True) -> Scale
     return float(mantissa * base ** (-exponent))
 
 
+_POWERS_OF_TEN = tuple(10**exponent for exponent in range(MAX_EXPONENT + 1))
+
+
 def decode_scaled_list(payload: bytes, *, strict: bool = True) -> list[ScaledValue]:
     if len(payload) % SCALED_SIZE:
         raise ProtocolError(f"expected a multiple of 8 bytes of scaled values, got {len(payload)}")
@@ -71,7 +74,7 @@ def decode_scaled_list(payload: bytes, *, strict: bool = True) -> list[ScaledVal
         if exponent == 0:
             append(float(mantissa))
         elif base == 10 and 0 < exponent <= MAX_EXPONENT:
-            append(mantissa / 10**exponent)
+            append(mantissa / _POWERS_OF_TEN[exponent])  # the same int as 10**exponent, not computed per value
         elif exponent == -1:  # the FF FF sentinel (a vacant macro): None, as decode_scaled says
             append(None)
         else:

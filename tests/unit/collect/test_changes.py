@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import pickle
 
 import pytest
 from hypothesis import given
@@ -120,6 +121,16 @@ def test_the_change_detectors_samples_are_the_samples_the_constructor_builds() -
     assert type(built) is Sample and built.historical is False
     with pytest.raises(dataclasses.FrozenInstanceError):
         built.value = 2.0  # type: ignore[misc]
+
+
+def test_a_reported_sample_is_a_sample_in_every_way_the_constructor_builds_one() -> None:
+    """report() fills a SampleDraft and gives it Sample's class: equal, equally hashed, frozen, and it pickles."""
+    reported = ChangeDetector().report("Macro/500", 2.5, MetricType.DOUBLE, 1_700_000_000_123)
+    built = Sample("Macro/500", 2.5, MetricType.DOUBLE, 1_700_000_000_123)
+    assert type(reported) is Sample and reported == built and hash(reported) == hash(built)
+    assert pickle.loads(pickle.dumps(reported)) == built and repr(reported) == repr(built)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        reported.value = 3.0  # type: ignore[misc]
 
 
 @given(_offers, st.sampled_from([0.0, 0.5]))

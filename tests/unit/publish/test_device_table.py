@@ -49,3 +49,20 @@ def test_a_device_declared_again_keeps_the_last_values_of_the_metrics_it_still_h
     assert set(birth) == {"Macro/500", "Macro/501"}  # Status/Run is no longer declared
     assert (birth["Macro/500"].double_value, birth["Macro/500"].timestamp) == (1.5, 5)
     assert birth["Macro/501"].is_null
+
+
+def test_devices_whose_aliases_have_the_same_widths_share_their_offsets_and_data_names_each_its_own() -> None:
+    """The alias field offsets are one tuple for the devices whose aliases are as wide; each DDATA still names
+    its own device's metric (the alias its DBIRTH gave)."""
+    n = SparkplugNode("G", "E", AliasMap(), clock=lambda: 1000)
+    n.session_started(1)
+    for device in ("m1", "m2"):
+        n.device_online(device, SPECS, [])
+    births = dbirths(n)
+    tables = n._devices
+    assert tables["m1"].alias_ends is tables["m2"].alias_ends
+    assert tables["m1"].alias_data != tables["m2"].alias_data
+    for device in ("m1", "m2"):
+        (message,) = n.device_data(device, [Sample("Macro/500", 7.5, MetricType.DOUBLE, 9)])
+        (metric,) = pl.decode(message.payload).metrics
+        assert metric.alias == births[device]["Macro/500"].alias and metric.double_value == 7.5
