@@ -90,15 +90,17 @@ class SampleDraft:
     historical: bool
 
 
-def new_sample(name: str, value: object, kind: MetricType, timestamp_ms: int, quality: Quality) -> Sample:
-    """The Sample that `Sample(name, value, kind, timestamp_ms, quality)` builds, at half the cost."""
+def new_sample(name: str, value: object, kind: MetricType, timestamp_ms: int, quality: Quality,
+               historical: bool = False) -> Sample:
+    """The Sample that `Sample(name, value, kind, timestamp_ms, quality, historical)` builds, at a quarter of
+    the cost: the one way the poll tick (edge.collect.changes) and the spool (edge.publish.spool_rows) build one."""
     sample: Any = _new(SampleDraft)
     sample.name = name
     sample.value = value
     sample.type = kind
     sample.timestamp_ms = timestamp_ms
     sample.quality = quality
-    sample.historical = False
+    sample.historical = historical
     sample.__class__ = Sample
     return sample
 

@@ -16,11 +16,9 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
 
-from edge.samples import MetricType, Quality, Sample, SampleDraft
+from edge.samples import MetricType, Quality, Sample, new_sample
 
-_new = object.__new__
 _PLAIN = frozenset({int, str, bool})  # types whose values differ exactly when they are unequal
 
 
@@ -120,15 +118,7 @@ class ChangeDetector:
                 # an int, str or bool unequal to the last one of its type: values_differ would say so too
             elif not values_differ(old, value, band):
                 return None
-        # edge.samples.new_sample, inline: the tick reports ~10 values (~16 at 1 Hz), nearly all of them changes.
-        sample: Any = _new(SampleDraft)
-        sample.name = name
-        sample.value = value
-        sample.type = kind
-        sample.timestamp_ms = timestamp_ms
-        sample.quality = quality
-        sample.historical = False
-        sample.__class__ = Sample
+        sample = new_sample(name, value, kind, timestamp_ms, quality)
         if position is None:
             self._extra[name] = sample
         else:

@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from operator import itemgetter
-from typing import Any, Literal
+from typing import Literal
 
-from edge.samples import MetricType, Quality, Sample, SampleDraft
+from edge.samples import MetricType, Quality, Sample, new_sample
 
 Format = Literal["sparkplug", "json"]
 SampleKind = Literal["data", "events"]
@@ -45,24 +45,17 @@ def decode_samples(body: bytes, historical: bool = False) -> list[Sample]:
 
 
 def samples_of(rows: list[Row], historical: bool) -> list[Sample]:
-    """Parsed rows as Samples, each filled as a draft (edge.samples.SampleDraft: a frozen dataclass's __init__
-    is four times the cost); TypeError or ValueError for a row that is not one."""
+    """Parsed rows as Samples (edge.samples.new_sample: a frozen dataclass's __init__ is four times the cost);
+    TypeError or ValueError for a row that is not one."""
     out: list[Sample] = []
     append = out.append
     for name, value, kind, ts, quality in rows:
-        sample: Any = _new(SampleDraft)
-        sample.name = name if type(name) is str else str(name)
-        sample.value = value
-        sample.type = _TYPES.get(kind) or MetricType(kind)
-        sample.timestamp_ms = ts if type(ts) is int else int(ts)
-        sample.quality = _QUALITIES.get(quality) or Quality(int(quality))
-        sample.historical = historical
-        sample.__class__ = Sample
-        append(sample)
+        append(new_sample(name if type(name) is str else str(name), value, _TYPES.get(kind) or MetricType(kind),
+                          ts if type(ts) is int else int(ts), _QUALITIES.get(quality) or Quality(int(quality)),
+                          historical))
     return out
 
 
-_new = object.__new__
 
 
 def read_entry(row_id: int, fmt: Format, device_id: str, kind: SampleKind, body: bytes, *,
