@@ -4,9 +4,9 @@ asyncua encodes a response whole, through its generic serializer (~8 us a Monito
 a browse result): the response to 10,000 monitored items created at once held the daemon's loop 80-150 ms
 in one go, a Browse of 500 folders 50-150 ms, after the work itself (which edge.opcua.subscriptions and
 edge.opcua.sessions serve in slices). `SlicedResponses` lets asyncua serve Browse, Read,
-TranslateBrowsePaths and CreateMonitoredItems as it does, keeps a response of more than SLICED_RESULTS
-results instead of sending it, and encodes its results a slice at a time (edge.opcua.turns). The bytes are
-asyncua's own (the same fields in the same order: tests/unit/opcua/test_large_responses.py compares them),
+TranslateBrowsePaths, CreateMonitoredItems and DeleteMonitoredItems as it does, keeps a response of more than
+SLICED_RESULTS results instead of sending it, and encodes its results a slice at a time (edge.opcua.turns). The
+bytes are asyncua's own (the same fields in the same order: tests/unit/opcua/test_large_responses.py compares them),
 signed, encrypted and sent at once, as one message.
 
 The connection serves its next request only after this one's response is sent, as before; other
@@ -36,7 +36,7 @@ _COUNT = ua_binary.Primitives.Int32.pack
 _SUBSCRIPTION_ID = ua_binary.Primitives.UInt32.unpack
 # the requests whose responses are a list of results per operation, encoded in chunks past ENCODE_CHUNK
 _CHUNKED = frozenset(ua.NodeId(getattr(ua.ObjectIds, f"{name}Request_Encoding_DefaultBinary")) for name in (
-    "Browse", "Read", "TranslateBrowsePathsToNodeIds", "CreateMonitoredItems"))
+    "Browse", "Read", "TranslateBrowsePathsToNodeIds", "CreateMonitoredItems", "DeleteMonitoredItems"))
 _CREATE_ITEMS = ua.NodeId(ua.ObjectIds.CreateMonitoredItemsRequest_Encoding_DefaultBinary)
 
 
