@@ -4,9 +4,9 @@ asyncua encodes a response whole, through its generic serializer (~8 us a Monito
 a browse result): the response to 10,000 monitored items created at once held the daemon's loop 80-150 ms
 in one go, a Browse of 500 folders 50-150 ms, after the work itself (which edge.opcua.subscriptions and
 edge.opcua.sessions serve in slices). `SlicedResponses` lets asyncua serve Browse, Read,
-TranslateBrowsePaths and CreateMonitoredItems as it does, keeps a response of more than SLICED_RESULTS
-results instead of sending it, and encodes its results a slice at a time (edge.opcua.turns). The bytes are
-asyncua's own (the same fields in the same order: tests/unit/opcua/test_large_responses.py compares them),
+TranslateBrowsePaths, CreateMonitoredItems and DeleteMonitoredItems as it does, keeps a response of more than
+SLICED_RESULTS results instead of sending it, and encodes its results a slice at a time (edge.opcua.turns). The
+bytes are asyncua's own (the same fields in the same order: tests/unit/opcua/test_large_responses.py compares them),
 signed, encrypted and sent at once, as one message.
 
 The connection serves its next request only after this one's response is sent, as before; other
@@ -20,7 +20,8 @@ edge.opcua.processor's GatewayProcessor, the class asyncua's binary server is gi
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+import struct
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from asyncua import ua
@@ -36,7 +37,10 @@ _COUNT = ua_binary.Primitives.Int32.pack
 _SUBSCRIPTION_ID = ua_binary.Primitives.UInt32.unpack
 # the requests whose responses are a list of results per operation, encoded in chunks past ENCODE_CHUNK
 _CHUNKED = frozenset(ua.NodeId(getattr(ua.ObjectIds, f"{name}Request_Encoding_DefaultBinary")) for name in (
-    "Browse", "Read", "TranslateBrowsePathsToNodeIds", "CreateMonitoredItems"))
+    "Browse", "Read", "TranslateBrowsePathsToNodeIds", "CreateMonitoredItems", "DeleteMonitoredItems"))
+# a MonitoredItemCreateResult: StatusCode, MonitoredItemId, RevisedSamplingInterval, RevisedQueueSize, then a
+# null FilterResult (a two-byte NodeId 0 and no body: three zero bytes)
+_CREATED = struct.Struct("<IIdI3x")
 _CREATE_ITEMS = ua.NodeId(ua.ObjectIds.CreateMonitoredItemsRequest_Encoding_DefaultBinary)
 
 
@@ -53,11 +57,31 @@ async def encode_results(response: Any) -> bytes:
     head, tail = empty[:len(empty) - diagnostics - 4], empty[len(empty) - diagnostics:]
     parts = [head, _COUNT(len(results))]
     if results:
-        encode = ua_binary.create_type_serializer(type(results[0]))
+        encode = _result_encoder(type(results[0]))
         async for chunk in slices(results):
             parts.extend(map(encode, chunk))
     parts.append(tail)
     return b"".join(parts)
+
+
+def _result_encoder(kind: type) -> Callable[[Any], bytes]:
+    """asyncua's serializer of `kind`; for a MonitoredItemCreateResult with no filter result (every item the
+    gateway creates but one with a filter) one struct pack of its four numbers and the null ExtensionObject,
+    the same bytes: asyncua's took ~2 us a result, a sixth of a monitored item's whole cost."""
+    generic: Callable[[Any], bytes] = ua_binary.create_type_serializer(kind)
+    if kind is not ua.MonitoredItemCreateResult:
+        return generic
+    pack = _CREATED.pack
+
+    def encode(result: ua.MonitoredItemCreateResult) -> bytes:
+        found = result.FilterResult
+        if found is None or (type(found) is ua.ExtensionObject and found.Body is None
+                             and found.TypeId.NodeIdType == ua.NodeIdType.TwoByte and found.TypeId.Identifier == 0):
+            return pack(result.StatusCode.value, result.MonitoredItemId, result.RevisedSamplingInterval,
+                        result.RevisedQueueSize)
+        return generic(result)
+
+    return encode
 
 
 class SlicedResponses(UaProcessor):

@@ -23,6 +23,8 @@ from asyncua import ua
 from asyncua.common.utils import Buffer
 from asyncua.ua import ua_binary
 
+from edge.opcua.item_decoding import fast_items
+
 _Decoder = Callable[[Any], Any]
 T = TypeVar("T")
 
@@ -66,7 +68,7 @@ class PendingItems(Sequence[T]):
 def _parameters_decoder(decode: Callable[[Any], _Decoder]) -> _Decoder:
     subscription_id = ua_binary.Primitives.UInt32.unpack
     timestamps = decode(ua.TimestampsToReturn)
-    item = decode(ua.MonitoredItemCreateRequest)
+    item = fast_items(decode(ua.MonitoredItemCreateRequest))  # (the usual item read at once, edge.opcua.item_decoding)
 
     def decode_parameters(data: Buffer) -> ua.CreateMonitoredItemsParameters:
         params = ua.CreateMonitoredItemsParameters(SubscriptionId=subscription_id(data),

@@ -1,4 +1,5 @@
-"""Client sessions serving Browse, TranslateBrowsePaths and Read requests of many operations in slices.
+"""Client sessions serving Browse, TranslateBrowsePaths, Read and DeleteMonitoredItems requests of many operations
+in slices.
 
 asyncua answers such a request in one go: the node client of the OPC UA benchmark browses the gateway's tree
 500 folders per request, which held the daemon's loop 30-60 ms just to decode the request and as much again
@@ -18,6 +19,7 @@ from asyncua.common.callback import CallbackType, ServerItemCallback
 from asyncua.crypto.permission_rules import User
 from asyncua.server.internal_session import InternalSession
 
+from edge.opcua.subscriptions import GatewayMonitoredItems
 from edge.opcua.turns import slices
 from edge.opcua.views import Subtypes
 
@@ -51,6 +53,18 @@ class GatewaySession(InternalSession):
             results += self.iserver.attribute_service.read(ua.ReadParameters(
                 MaxAge=params.MaxAge, TimestampsToReturn=params.TimestampsToReturn, NodesToRead=chunk))
         await callbacks.dispatch(CallbackType.PostRead, ServerItemCallback(params, results, user, self.external))
+        return results
+
+    async def delete_monitored_items(self, params: ua.DeleteMonitoredItemsParameters) -> list[ua.StatusCode]:
+        """asyncua's, the items deleted a slice at a time (edge.opcua.subscriptions) with the loop given turns;
+        the ItemSubscriptionDeleted callbacks told once, of the whole request, as asyncua tells them."""
+        subscription = self.subscription_service.subscriptions.get(params.SubscriptionId)
+        items = getattr(subscription, "monitored_item_srv", None)
+        if not isinstance(items, GatewayMonitoredItems):  # (no such subscription: asyncua's refusal)
+            return await super().delete_monitored_items(params)
+        results = await items.delete_in_slices(params.MonitoredItemIds)
+        await self.iserver.callback_service.dispatch(CallbackType.ItemSubscriptionDeleted, ServerItemCallback(
+            params, results, None, self.external))
         return results
 
 

@@ -37,9 +37,20 @@ def _created(count: int) -> ua.CreateMonitoredItemsResponse:
     return response
 
 
+def _created_unusual() -> ua.CreateMonitoredItemsResponse:
+    """Results the struct pack leaves to asyncua (a filter result) or writes itself (none, a bad status)."""
+    response = _created(4)
+    response.Results[0].FilterResult = ua.EventFilterResult(SelectClauseResults=[ua.StatusCode()])
+    response.Results[1].FilterResult = None
+    response.Results[2].StatusCode = ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+    response.Results[3].FilterResult = ua.ExtensionObject(TypeId=ua.NodeId(5, 0), Body=b"x")
+    return response
+
+
 @pytest.mark.asyncio
-@pytest.mark.parametrize("response", [_browse(0), _browse(3), _browse(700), _read(300), _created(1000)],
-                         ids=["empty", "few", "browse", "read", "created"])
+@pytest.mark.parametrize("response", [_browse(0), _browse(3), _browse(700), _read(300), _created(1000),
+                                      _created_unusual()],
+                         ids=["empty", "few", "browse", "read", "created", "created-unusual"])
 async def test_the_bytes_are_asyncuas(response: Any) -> None:
     assert await encode_results(response) == struct_to_binary(response)
 
