@@ -1,17 +1,18 @@
-"""A client's Publish request served without walking asyncua's chain of service comparisons, and read and
+"""A client's Publish request served without walking asyncua's chain of service comparisons, read and
 answered in bytes written directly.
 
 asyncua's UaProcessor finds a request's service by comparing its type id with a freshly built NodeId per
 service, one after the other (`typeid == ua.NodeId(ua.ObjectIds.X)`), and builds a list of seven more first
 to tell session-less services. Publish comes 25th: about 30 NodeIds built and compared (~1.5-3.5 us each)
 for every Publish request, of which a client subscribed to the fleet sends one per publishing interval
-(50 a second at 20 ms). Publish is recognised here by its first bytes, its header and acknowledgements read
-and its response written by edge.opcua.publish_wire (asyncua's generic decoder and encoder took 10-85 us
-each per Publish), and served as asyncua serves it: its checks of the session and the user's permission,
-its activity stamps, the acknowledgements as its SubscriptionService.publish takes them, then its Publish
-branch (asyncua 2.1). A request in an encoding publish_wire does not read is decoded by asyncua and served
-the same way; every other request goes through edge.opcua.large_responses (a large result list encoded in
-slices), then asyncua's own dispatch.
+(50 a second at 20 ms). Here a Publish request is recognised by its first bytes, its header and
+acknowledgements are read and its response written by edge.opcua.publish_wire (asyncua's generic decoder
+and encoder took 10-85 us each per Publish), the response sent in edge.opcua.secure_send's chunk. It is
+served as asyncua serves it: its checks of the session, the user's permission and the session's activation
+(main's short path for Publish left that one out), its activity stamps, the acknowledgements as its
+SubscriptionService.publish takes them, then its Publish branch (asyncua 2.1). A request in an encoding
+publish_wire does not read is decoded by asyncua and served the same way; every other request goes through
+edge.opcua.large_responses (a large result list encoded in slices), then asyncua's own dispatch.
 
 asyncua internals this relies on (the >=2.1,<2.2 pin): UaProcessor's process_message/_process_message split,
 its `_publish_requests`, `_publish_results_subs`, `publish_request_limit` and `_evict_publish_request`,
@@ -35,9 +36,9 @@ from asyncua.ua.ua_binary import struct_from_binary
 
 from edge.opcua.large_responses import SlicedResponses
 from edge.opcua.publish_wire import PUBLISH_TYPE, PublishHeader, publish_request, publish_response
+from edge.opcua.secure_send import secure_message
 
 _PUBLISH = ua.NodeId(ua.ObjectIds.PublishRequest_Encoding_DefaultBinary)
-_SECURE_MESSAGE = ua.MessageType.SecureMessage
 _GOOD = ua.StatusCodes.Good
 _BAD_SUBSCRIPTION = ua.StatusCodes.BadSubscriptionIdInvalid
 _logger = logging.getLogger(__name__)
@@ -80,6 +81,8 @@ class GatewayProcessor(SlicedResponses):
             raise ua.uaerrors.BadUserAccessDenied
         self.session_last_activity = time.monotonic()
         session.touch()
+        if not session.is_activated():  # as asyncua refuses every service of a session not activated
+            raise ServiceError(ua.StatusCodes.BadSessionNotActivated)
         if acks is None:  # decoded by asyncua (an encoding publish_wire leaves to it)
             params = struct_from_binary(ua.PublishParameters, body)
             acks = [(ack.SubscriptionId, ack.SequenceNumber) for ack in params.SubscriptionAcknowledgements or ()]
@@ -111,11 +114,11 @@ class GatewayProcessor(SlicedResponses):
         return True
 
     async def forward_publish_response(self, result: ua.PublishResult, requestdata: PublishRequestData) -> None:
-        """asyncua's: the PublishResponse of `result` with the request's results, sent (publish_wire's bytes)."""
+        """asyncua's: the PublishResponse of `result` with the request's results, sent (publish_wire's bytes, in
+        secure_send's chunk)."""
         result.Results = requestdata.results
         body = publish_response(requestdata.requesthdr.RequestHandle, result)
-        self._transport.write(self._connection.message_to_binary(
-            body, message_type=_SECURE_MESSAGE, request_id=requestdata.seqhdr.RequestId))
+        self._transport.write(secure_message(self._connection, body, requestdata.seqhdr.RequestId))
 
 
 def install() -> None:
