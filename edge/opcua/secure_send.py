@@ -11,7 +11,7 @@ channel's sequence numbers, are asyncua's own (tests/unit/opcua/test_secure_send
 None, Sign and SignAndEncrypt modes).
 
 asyncua internals this relies on (the >=2.1,<2.2 pin): SecureConnection's `security_policy`, `security_token`,
-`_limits` and `_sequence_number`, and MessageChunk.max_body_size.
+`_limits` and `_sequence_number`, and how MessageChunk.max_body_size sizes a chunk.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ import struct
 from typing import Any
 
 from asyncua import ua
-from asyncua.common.connection import MessageChunk
 
 _HEADER = struct.Struct("<3ssII").pack  # MessageType, IsFinal, MessageSize, SecureChannelId
 _TOKEN = struct.Struct("<I").pack  # the symmetric security header: TokenId
 _SEQUENCE = struct.Struct("<II").pack  # SequenceNumber, RequestId
+_SEQUENCE_SIZE = 8
 _HEADERS_SIZE = 12 + 4  # message header with the channel id, security header
 _MESSAGE, _SINGLE = ua.MessageType.SecureMessage, ua.ChunkType.Single
 
@@ -32,7 +32,12 @@ _MESSAGE, _SINGLE = ua.MessageType.SecureMessage, ua.ChunkType.Single
 def secure_message(connection: Any, body: bytes, request_id: int) -> bytes:
     """`connection.message_to_binary(body, SecureMessage, request_id)`: the channel's next sequence number."""
     crypto = connection.security_policy.symmetric_cryptography
-    if not body or len(body) > MessageChunk.max_body_size(crypto, connection._limits.max_send_buffer):
+    block, encrypted_block, signature_size = (
+        crypto.plain_block_size(), crypto.encrypted_block_size(), crypto.signature_size())
+    # MessageChunk.max_body_size: the largest body one chunk of the peer's receive buffer holds
+    largest = ((connection._limits.max_send_buffer - _HEADERS_SIZE) // encrypted_block * block
+               - _SEQUENCE_SIZE - signature_size - crypto.min_padding_size())
+    if not body or len(body) > largest:
         return bytes(connection.message_to_binary(body, message_type=_MESSAGE, request_id=request_id))
     sequence = connection._sequence_number + 1
     if sequence >= 1 << 32:
@@ -41,11 +46,9 @@ def secure_message(connection: Any, body: bytes, request_id: int) -> bytes:
     token = connection.security_token
     plain = _SEQUENCE(sequence, request_id) + body
     plain += crypto.padding(len(plain))
-    signed_size = len(plain) + crypto.signature_size()
-    block = crypto.plain_block_size()
+    signed_size = len(plain) + signature_size
     if signed_size % block:
         raise ua.UaError("Encryption error")  # as asyncua's MessageChunk.encrypted_size
     security = _TOKEN(token.TokenId)
-    header = _HEADER(_MESSAGE, _SINGLE, _HEADERS_SIZE + signed_size // block * crypto.encrypted_block_size(),
-                     token.ChannelId)
+    header = _HEADER(_MESSAGE, _SINGLE, _HEADERS_SIZE + signed_size // block * encrypted_block, token.ChannelId)
     return header + security + crypto.encrypt(plain + crypto.signature(header + security + plain))

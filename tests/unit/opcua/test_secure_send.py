@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 from asyncua import ua
-from asyncua.common.connection import SecureConnection, TransportLimits
+from asyncua.common.connection import MessageChunk, SecureConnection, TransportLimits
 from asyncua.crypto.security_policies import (
     SecurityPolicyAes128Sha256RsaOaep,
     SecurityPolicyBasic256Sha256,
@@ -66,7 +66,8 @@ POLICIES = [(None, ua.MessageSecurityMode.None_),
 def test_message_is_asyncuas(certificates: tuple[Any, Any, Any], policy: type | None,
                              mode: ua.MessageSecurityMode) -> None:
     theirs, ours = _pair(certificates, policy, mode)
-    for request_id, size in enumerate([0, 1, 15, 16, 17, 100, 3000, 8100, 8192, 20_000, 5]):
+    largest = MessageChunk.max_body_size(theirs.security_policy.symmetric_cryptography, 8192)
+    for request_id, size in enumerate([0, 1, 15, 16, 17, 100, 3000, largest - 1, largest, largest + 1, 20_000, 5]):
         body = os.urandom(size)
         expected = theirs.message_to_binary(body, message_type=ua.MessageType.SecureMessage, request_id=request_id)
         assert secure_message(ours, body, request_id) == expected
