@@ -26,6 +26,7 @@ from asyncua.common.connection import SecureConnection, TransportLimits
 from asyncua.common.utils import Buffer
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from asyncua.server.internal_session import SessionState
+from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_to_binary
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes
@@ -58,6 +59,16 @@ class _Transport:
         return None
 
 
+async def client_subscription(session: Any, served: UaProcessor) -> Any:
+    """A subscription of `session` whose responses `served` sends, as a client's CreateSubscription makes it,
+    publishing only when told to (an hour's publishing interval)."""
+    created = await session.create_subscription(
+        ua.CreateSubscriptionParameters(RequestedPublishingInterval=3_600_000, RequestedLifetimeCount=10_000,
+                                        RequestedMaxKeepAliveCount=1_000, PublishingEnabled=True),
+        served.forward_publish_response, request_callback=served.get_publish_request)
+    return session.subscription_service.subscriptions[created.SubscriptionId]
+
+
 async def measure(publishes: int, items: int) -> dict[str, Any]:
     server = Server()
     await server.init()
@@ -70,12 +81,8 @@ async def measure(publishes: int, items: int) -> dict[str, Any]:
     served._connection = SecureConnection(policy, TransportLimits())
     session = served.session = server.iserver.create_session("bench", external=True)
     session.state = SessionState.Activated
-    created = await session.create_subscription(
-        ua.CreateSubscriptionParameters(RequestedPublishingInterval=3_600_000, RequestedLifetimeCount=10_000,
-                                        RequestedMaxKeepAliveCount=1_000, PublishingEnabled=True),
-        served.forward_publish_response, request_callback=served.get_publish_request)
-    sid = created.SubscriptionId
-    subscription = session.subscription_service.subscriptions[sid]
+    subscription = await client_subscription(session, served)
+    sid = subscription.data.SubscriptionId
     await asyncio.sleep(0)  # its first publish, waiting for a request
     note = b"\x07\x00\x00\x00" + struct_to_binary(ua.DataValue(ua.Variant(2.5, ua.VariantType.Double)))
     seqhdr = ua.SequenceHeader()

@@ -17,6 +17,7 @@ from asyncua.server.internal_session import SessionState
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import nodeid_from_binary, struct_from_binary, struct_to_binary
 
+from bench.opcua_publish import client_subscription
 from edge.opcua import processor, subscriptions
 from edge.opcua.processor import GatewayProcessor
 
@@ -75,12 +76,8 @@ async def _scenario(server: Server, kind: type[UaProcessor]) -> list[Any]:
     served = kind(server.iserver, transport, TransportLimits())
     session = served.session = server.iserver.create_session("test", external=True)
     session.state = SessionState.Activated  # (as ActivateSession leaves it)
-    created = await session.create_subscription(
-        ua.CreateSubscriptionParameters(RequestedPublishingInterval=3_600_000, RequestedLifetimeCount=10_000,
-                                        RequestedMaxKeepAliveCount=1_000, PublishingEnabled=True),
-        served.forward_publish_response, request_callback=served.get_publish_request)
-    sid = created.SubscriptionId
-    subscription = session.subscription_service.subscriptions[sid]
+    subscription = await client_subscription(session, served)
+    sid = subscription.data.SubscriptionId
     await asyncio.sleep(0)  # the subscription's loop makes its first publish: it waits for a request
     assert sid in served._publish_results_subs
     seqhdr = ua.SequenceHeader()
@@ -134,19 +131,16 @@ async def test_a_session_not_activated_cannot_publish(server: Server, kind: type
     transport = _Transport()
     served = kind(server.iserver, transport, TransportLimits())
     owner = server.iserver.create_session("owner", external=True)
-    created = await owner.create_subscription(
-        ua.CreateSubscriptionParameters(RequestedPublishingInterval=3_600_000, RequestedLifetimeCount=10_000,
-                                        RequestedMaxKeepAliveCount=1_000, PublishingEnabled=True),
-        served.forward_publish_response, request_callback=served.get_publish_request)
-    subscription = owner.subscription_service.subscriptions[created.SubscriptionId]
+    subscription = await client_subscription(owner, served)
+    sid = subscription.data.SubscriptionId
     subscription._not_acknowledged_results[5] = ua.PublishResult()
     served.session = server.iserver.create_session("intruder", external=True)
     seqhdr = ua.SequenceHeader()
     seqhdr.SequenceNumber, seqhdr.RequestId = 1, 9
     try:
-        assert await served.process_message(seqhdr, _publish(1, [(created.SubscriptionId, 5)]))
+        assert await served.process_message(seqhdr, _publish(1, [(sid, 5)]))
     finally:
-        await owner.delete_subscriptions([created.SubscriptionId])
+        await owner.delete_subscriptions([sid])
     [fault] = [_decoded(data) for data in transport.written]
     assert fault.ResponseHeader.ServiceResult.value == ua.StatusCodes.BadSessionNotActivated
     assert list(subscription._not_acknowledged_results) == [5]
