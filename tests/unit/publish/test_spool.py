@@ -311,7 +311,7 @@ def test_reads_of_many_lengths_keep_few_prepared_statements(tmp_path: Path) -> N
     """A replay reads, acks and queries lists of every length; one statement text per query keeps SQLite's
     cache of prepared statements small (one per list length held ~21 MB at 1,000 machines)."""
     spool = DiskSpool(tmp_path / "s.sqlite")
-    devices = [f"m{i:03d}" for i in range(400)]
+    devices = ['Hallé "3" \\ 😀'] + [f"m{i:03d}" for i in range(1, 400)]  # names pass through JSON unchanged
     for device in devices:
         spool.hold("sparkplug", device, "data", [sample(1)])
     ids = [i for row_ids in spool.oldest_ids("sparkplug", 400).values() for i in row_ids]
