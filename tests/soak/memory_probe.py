@@ -1,12 +1,13 @@
 """The soak child's memory probe (SOAK_MEMORY_DIR): where an RSS step comes from, live objects or the heap.
 
-Each SIGUSR1 writes `probe-N.txt` to the directory: the C heap's figures (glibc mallinfo2: bytes in use,
-free inside the heap, mmapped); with SOAK_MEMORY_TRACE=1, from the second signal on, also the Python
-allocations still alive that were made since the first signal (tracemalloc starts at the first), the top
-lines by size and by growth against the previous probe. Every report line goes to `reports.jsonl` too. A
-step the heap's free bytes explain is memory glibc keeps, not a leak; one outside the C heap (RSS minus
-its arena) is Python's own small-object arenas. tracemalloc costs CPU: at 1,000 machines it slows the
-daemon until CNC sessions time out, so it is off unless asked for."""
+Each SIGUSR1 writes `probe-N.txt` to the directory: the C heap's figures (glibc mallinfo2: bytes in use, free
+inside the heap, mmapped), RSS by kind of mapping, pymalloc's arenas and the bytes of their live blocks, and
+SQLite's own heap (page caches, prepared statements); with SOAK_MEMORY_TRACE=1, from the second signal on,
+also the Python allocations still alive that were made since the first signal (tracemalloc starts at the
+first), the top lines by size and by growth against the previous probe. Every report line goes to
+`reports.jsonl` too. A step the heap's free bytes explain is memory glibc keeps, not a leak; one outside the C
+heap (RSS minus its arena) is Python's own small-object arenas. tracemalloc costs CPU: at 1,000 machines it
+slows the daemon until CNC sessions time out, so it is off unless asked for."""
 
 from __future__ import annotations
 
