@@ -51,7 +51,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
                                      duration_s=args.duration, quick=args.quick),
         "outage": lambda: outage.run(machines=sizes[0] if sizes else None,
                                      period_s=float(args.period) if args.period else None,
-                                     outage_s=args.outage, duration_s=args.duration, quick=args.quick),
+                                     outage_s=args.outage, duration_s=args.duration, quick=args.quick,
+                                     outages=args.outages),
     }
 
 
@@ -68,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="fleet: seconds between the last birth and the window (default 10)")
     parser.add_argument("--outage", type=float, default=None, metavar="SECONDS",
                         help="outage: how long the broker stays down (default 60)")
+    parser.add_argument("--outages", type=int, default=1, metavar="N",
+                        help="outage: this many outages in one daemon's life, a row each (default 1)")
     parser.add_argument("--latency", type=float, default=roundtrip.LATENCY_S,
                         help="simulated per-request latency for roundtrip, seconds (default 0.002)")
     parser.add_argument("--spy", default="", metavar="FILE",
