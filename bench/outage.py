@@ -26,13 +26,14 @@ import sys
 import tempfile
 import threading
 import time
-from collections import Counter
+from array import array
+from collections import Counter, defaultdict
 from pathlib import Path
 from typing import IO, Any
 
 from bench.fleet import config_text, start_fleet_sims, wait_until
 from bench.procs import REPO, python_env, running_broker, stop_sims
-from bench.report import Check, Result
+from bench.report import Check, Result, percentile
 from tests.helpers import Mosquitto
 from tests.integration.delivery import key_of
 from tests.integration.tcp_relay import TcpRelay
@@ -50,11 +51,20 @@ class ArrivalCounter(Checker):
     def __init__(self, broker: Mosquitto) -> None:
         self.live: Counter[int] = Counter()
         self.backlog: Counter[int] = Counter()
+        self.lags: dict[int, array[float]] = defaultdict(lambda: array("f"))  # live values' lags (s), by second
         super().__init__(broker)
 
     def _add(self, key: Key, historical: bool) -> None:
         super()._add(key, historical)
-        (self.backlog if historical else self.live)[int(time.time())] += 1
+        now = time.time()
+        (self.backlog if historical else self.live)[int(now)] += 1
+        if not historical:  # key = ("spb", device, name, CNC timestamp in ms, ...)
+            self.lags[int(now)].append(now - key[3] / 1000)
+
+    def lag_p99_ms(self, start: float, end: float) -> float:
+        """The live values' p99 lag (CNC time of the tick to receipt) over whole seconds in [start, end)."""
+        lags = [lag for s in range(int(start) + 1, int(end)) for lag in self.lags.get(s, ())]
+        return percentile(lags, 99) * 1000 if lags else float("nan")
 
     def rate(self, counts: Counter[int], start: float, end: float) -> float:
         """Values per second over whole seconds in [start, end)."""
@@ -177,6 +187,7 @@ def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, chil
     _probe(child)  # SOAK_MEMORY_DIR: tracing starts here (tests/soak/memory_probe.py)
     before = dict(child.last)
     live_before = checker.rate(checker.live, time.time() - 10, time.time())
+    lag_before = checker.lag_p99_ms(time.time() - 10, time.time())
     killed = time.time()
     broker.stop(kill=True)
     relay.shut()
@@ -206,6 +217,8 @@ def _outage(broker: Mosquitto, relay: RelayThread, checker: ArrivalCounter, chil
         "backlog_values": backlog, "live_values_per_s": live_before,
         "replay_values_per_s": replay_rate, "replay_x_live": replay_rate / live_before if live_before else float("nan"),
         "live_during_replay_per_s": checker.rate(checker.live, born, cleared) if cleared - born >= 2 else float("nan"),
+        "live_p99_ms_before": lag_before,
+        "live_p99_ms_during_replay": checker.lag_p99_ms(born - 1, cleared + 1),
         "rss_mb_before": before.get("rss", 0) / 1e6,
         "rss_mb_max_during": max((r["rss"] for r in during), default=0) / 1e6,
         "rss_mb_after": after.get("rss", 0) / 1e6,
@@ -242,7 +255,9 @@ def run(machines: int | None = None, period_s: float | None = None, outage_s: fl
     result.rows += rows
     row = rows[-1]
     print(f"  outage N={n}: lost {row['lost']} of {row['collected']}, reconnect {row['reconnect_s']:.1f} s, "
-          f"replay {row['replay_s']:.1f} s at {row['replay_x_live']:.1f}x live", flush=True)
+          f"replay {row['replay_s']:.1f} s at {row['replay_x_live']:.1f}x live, cleared "
+          f"{row['cleared_after_return_s']:.1f} s after the return, live p99 {row['live_p99_ms_before']:.0f} ms "
+          f"before, {row['live_p99_ms_during_replay']:.0f} ms during the replay", flush=True)
     result.checks += [
         Check(f"samples lost across a {outage:g} s outage, {n} machines", row["lost"], 0, "<="),
         Check("backlog cleared after the broker's return", row["cleared_after_return_s"], CLEAR_TARGET_S, "<=", " s"),

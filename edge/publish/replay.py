@@ -52,7 +52,9 @@ HELD_BYTES = 1024 * 1024
 READ_ROWS = 256  # Sparkplug reads a step's bodies about this many rows (whole devices) at a time
 MERGE_ROWS = 16  # spool rows of one device in one replayed DDATA at most (~5 kB at 12 values a row)
 SLICE_S = 0.02  # behind its pace, a replay yields to live ticks after this much work at least, not each chunk
-MAX_SLICE_S = 0.1  # and after this much at most (what a live tick may wait for the replay)
+# and after this much at most: half the period of the 1 Hz ticks a fleet whose live turns grow this long polls
+# at, so a live tick, waiting a slice and its own turn, still completes within its period (`_Pacer`)
+MAX_SLICE_S = 0.5
 
 
 class ReplayTarget(Protocol):
@@ -386,7 +388,9 @@ class _Pacer:
     the pace, the replay keeps the loop for a slice of work before it yields: as long as the loop was away
     at its last yield (the live ticks' turn), at least SLICE_S and at most MAX_SLICE_S. Behind its pace the
     replay so gets about half the loop, however long the live turns grow; a fixed 20 ms slice got it 5x the
-    live rate at 1,000 machines, not the 12x asked for (bench outage)."""
+    live rate at 1,000 machines, not the 12x asked for (bench outage). The bound is the live ticks' period,
+    not what one turn takes on a fast host: capped at 0.1 s, a host whose live turn of 1,000 machines took
+    longer gave the replay a quarter of the loop or less (1.2x the live rate, 26 s of 41 s yielding)."""
 
     def __init__(self, started: float, rate: float, chunk: int) -> None:
         self._started = started

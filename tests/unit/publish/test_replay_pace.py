@@ -167,6 +167,44 @@ def test_behind_its_pace_the_replay_takes_a_slice_as_long_as_the_live_turn(monke
     assert clock.yields < math.ceil(work / replay.SLICE_S)
 
 
+def _work_per_slice(clock: Clock, work_s: float = 0.01, slices: int = 3) -> list[float]:
+    """A pacer behind its pace (rows due at once) doing `work_s` of work between chunk boundaries: the work
+    it did between its yields, for `slices` yields after the first."""
+    pacer = replay._Pacer(clock.now, rate=1e9, chunk=1)
+
+    async def run() -> list[float]:
+        await pacer.pace(force=True)  # the first yield: the loop is away for one live turn
+        done: list[float] = []
+        worked = 0.0
+        while len(done) < slices:
+            clock.now += work_s
+            worked += work_s
+            pacer.counted(1)
+            if await pacer.pace():
+                done.append(round(worked, 6))
+                worked = 0.0
+        return done
+
+    return asyncio.run(run())
+
+
+@pytest.mark.parametrize(("turn_s", "slice_s"), [
+    (0.005, replay.SLICE_S),  # a short live turn: the least slice, not one chunk
+    (0.3, 0.3),  # a live turn longer than 0.1 s (1,000 machines on a slow host): a slice as long
+    (2.0, 0.5),  # a turn longer than half a 1 Hz tick's period: that half period
+])
+def test_behind_its_pace_the_replay_keeps_the_loop_as_long_as_the_live_turn_up_to_half_a_1_hz_period(
+        monkeypatch: pytest.MonkeyPatch, turn_s: float, slice_s: float) -> None:
+    """Behind its pace the replay gets about half the loop: after a yield whose live turn took `turn_s`,
+    it works that long before it yields again (a fixed 0.1 s bound gave it a quarter of the loop or less
+    where 1,000 machines' live turn was 0.3 s: 1.2x the live rate, not 10x), but never longer than half
+    the period of a 1 Hz tick, which then still completes within its period."""
+    clock = Clock(turn_s=turn_s)
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    assert _work_per_slice(clock) == [pytest.approx(slice_s, abs=0.0101)] * 3
+
+
 class HeldBarriers(Link):
     """A broker whose PUBACKs come only when the test releases them, oldest first."""
 
