@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 from datetime import UTC, datetime, timedelta
 
 import pytest
 from asyncua import ua
-from asyncua.ua.ua_binary import extensionobject_to_binary, struct_from_binary, struct_to_binary
+from asyncua.ua.ua_binary import (
+    extensionobject_to_binary,
+    set_string_encoding,
+    struct_from_binary,
+    struct_to_binary,
+)
 
 from edge.opcua import encoding
 from edge.opcua.values import ServerTime, SharedDataValue, data_value, offline_value, server_now
@@ -30,6 +36,7 @@ SAMPLES = [
     Sample("d-int", 7, MetricType.DOUBLE, CNC_MS),
     Sample("s", "O1234 \u00c4 \U0001f600", MetricType.STRING, CNC_MS),
     Sample("s-empty", "", MetricType.STRING, CNC_MS),
+    Sample("s-surrogate", "O\udcff1", MetricType.STRING, CNC_MS),  # an undecodable byte kept, as asyncua does
     Sample("t", CNC_MS - 5000, MetricType.DATETIME, CNC_MS),
     Sample("stale", 3, MetricType.INT32, CNC_MS, Quality.STALE),
     Sample("bad", 3, MetricType.INT32, CNC_MS, Quality.BAD),
@@ -138,3 +145,15 @@ def test_queued_notes_make_asyncuas_notification_whatever_their_form() -> None:
     assert extensionobject_to_binary(encoding.data_change_of_notes(mixed)) == theirs
     assert extensionobject_to_binary(encoding.data_change_of_notes([])) == \
         extensionobject_to_binary(ua.DataChangeNotification())
+
+
+def test_a_string_is_encoded_in_asyncuas_configured_encoding() -> None:
+    """The string encoder writes the bytes itself: it must follow asyncua's string encoding setting as
+    Primitives.String.pack does (a context variable, set here in a copy of the context only)."""
+    def encoded() -> tuple[bytes, bytes]:
+        set_string_encoding("latin-1")
+        value = data_value(Sample("s", "O\u00c4", MetricType.STRING, CNC_MS), server_now())
+        return value.encoded, struct_to_binary(_plain(value))
+
+    ours, asyncuas = contextvars.copy_context().run(encoded)
+    assert ours == asyncuas and b"O\xc4" in ours
