@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import random
 import shutil
 import signal
 import socket
@@ -19,6 +20,31 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def _ephemeral_low() -> int:
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
+def free_listen_port(low: int = 20000) -> int:
+    """A free port below the kernel's ephemeral range, for a listener that closes and re-binds the same port.
+
+    A port from `free_port()` lies in the ephemeral range: while nothing listens there, any outgoing connection
+    on the host may be given it as its local port, and a client retrying a connect to it may even connect to
+    itself (TCP simultaneous open), so the re-bind fails with EADDRINUSE (seen in `bench outage`)."""
+    high = _ephemeral_low() - 1
+    for port in random.sample(range(low, high), min(200, max(0, high - low))):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    return free_port()
 
 
 def wait_for(condition: Callable[[], object], timeout: float = 10.0, interval: float = 0.01,

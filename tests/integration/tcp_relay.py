@@ -13,14 +13,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 
-from tests.helpers import free_port
+from tests.helpers import free_listen_port
 
 
 class TcpRelay:
     def __init__(self, target_host: str, target_port: int) -> None:
         self.target = (target_host, target_port)
         self.host = "127.0.0.1"
-        self.port = free_port()
+        self.port = free_listen_port()  # it re-binds after stop_listening()
         self.accepting = True
         self.forwarding = True
         self.accepted = 0
