@@ -29,8 +29,8 @@ from typing import Any
 from asyncua import ua
 from asyncua.ua.ua_binary import extensionobject_to_binary, nodeid_to_binary, struct_to_binary
 
-# 100 ns ticks from 1601-01-01 to the Unix epoch
-_EPOCH_TICKS = 116_444_736_000_000_000
+from edge.opcua.values import WIN_EPOCH_US
+
 # a Publish request's type id, FourByte-encoded as every client we know sends it (a Numeric one: asyncua's path)
 PUBLISH_TYPE = nodeid_to_binary(ua.FourByteNodeId(ua.ObjectIds.PublishRequest_Encoding_DefaultBinary))
 _RESPONSE_TYPE = nodeid_to_binary(ua.FourByteNodeId(ua.ObjectIds.PublishResponse_Encoding_DefaultBinary))
@@ -104,7 +104,7 @@ def publish_request(data: bytes) -> tuple[PublishHeader, int, list[tuple[int, in
 
 def now_ticks() -> int:
     """The current time as asyncua encodes `datetime.now(timezone.utc)` (microsecond resolution)."""
-    return _EPOCH_TICKS + time.time_ns() // 1000 * 10
+    return (time.time_ns() // 1000 + WIN_EPOCH_US) * 10  # as the address space stamps a batch's ServerTimestamp
 
 
 def _notification(obj: Any) -> bytes:

@@ -214,11 +214,10 @@ class GatewayMonitoredItems(MonitoredItemService):
         knows its callback's handle): deleting n items one by one walked n^2/2 entries. What the item had
         queued and not yet published goes with it: a client is sent nothing of an item it deleted."""
         item = self._monitored_items.get(mid)
+        if item is not None:
+            self._drop(mid, item)
         if item is None or self._monitored_events:  # (an event item: asyncua's own walk of its few)
-            if item is not None:
-                self._drop(mid, item)
             return super()._delete_monitored_items(mid)
-        self._drop(mid, item)
         handle = item.callback_handle
         if handle is not None and self._monitored_datachange.get(handle) == mid:
             del self._monitored_datachange[handle]

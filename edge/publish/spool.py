@@ -516,6 +516,8 @@ _LISTED = "(SELECT value FROM json_each(?))"
 
 def _listed(values: Iterable[object]) -> str:
     return json.dumps(list(values), separators=(",", ":"))
+
+
 # SQLite's page cache for the spool, at most (its default is 2 MB). Rows are appended at the end of the table
 # and its indexes and replayed and deleted from the start: the pages in use are a few at each end, and a
 # 60,000-row outage at 1,000 machines costs the same CPU with a quarter of the cache, which otherwise stays

@@ -56,8 +56,6 @@ def samples_of(rows: list[Row], historical: bool) -> list[Sample]:
     return out
 
 
-
-
 def read_entry(row_id: int, fmt: Format, device_id: str, kind: SampleKind, body: bytes, *,
                lazy: bool = False) -> SpoolEntry:
     """A stored row for the replay, its samples read now (ValueError for a body that is not one), or with
