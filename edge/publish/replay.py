@@ -150,7 +150,10 @@ class Replayer:
         async def confirmed(barrier: asyncio.Future[bool], step: _Step) -> bool:
             """The step's barrier came back: its rows reached the broker and leave the spool."""
             nonlocal sent_rows
-            if not await barrier:
+            waited = time.monotonic()
+            ok = await barrier
+            pacer.barrier_s += time.monotonic() - waited
+            if not ok:
                 return False
             spool.ack(step.done)
             if delivered is not None:
@@ -218,8 +221,8 @@ class Replayer:
         if delivered is not None and not left:
             delivered.forget()
         if sent_rows:
-            log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d", fmt, sent_rows,
-                     time.monotonic() - started, left)
+            log.info("spool replayed format=%s rows=%d seconds=%.1f left=%d rows_per_s=%.0f %s", fmt, sent_rows,
+                     time.monotonic() - started, left, rate, pacer.summary())
             if not left and self.after_replay is not None:
                 self.after_replay()
 
@@ -340,7 +343,9 @@ class Replayer:
         """At a chunk boundary: keep to the pace, and wait while the MQTT connection holds more than
         HELD_BYTES for the broker (it is slower than the pace)."""
         if step.conn.held > HELD_BYTES:
+            waited = time.monotonic()
             await step.conn.wait_for_room(HELD_BYTES // 2)
+            pacer.room_s += time.monotonic() - waited
             pacer.resumed()
         await pacer.pace()
 
@@ -399,6 +404,14 @@ class _Pacer:
         self.rows = 0  # rows handed out since `started`
         self._slice_from = time.monotonic()
         self._slice = SLICE_S
+        # where a replay's time went (its end log): yields behind the pace and the loop's other work while it
+        # waited, sleeps ahead of the pace, waits for the MQTT client's room and for the steps' barriers
+        self.yields = 0
+        self.away_s = 0.0
+        self.max_away_s = 0.0
+        self.ahead_s = 0.0
+        self.room_s = 0.0
+        self.barrier_s = 0.0
 
     def counted(self, rows: int) -> bool:
         """Count rows handed out; True when a chunk boundary was passed (time to `pace`)."""
@@ -421,7 +434,15 @@ class _Pacer:
         self._slice_from = time.monotonic()
         away = self._slice_from - now - max(0.0, ahead)  # the loop's other work while the replay waited
         self._slice = min(MAX_SLICE_S, max(SLICE_S, away))
+        self.yields += 1
+        self.away_s += away
+        self.max_away_s = max(self.max_away_s, away)
+        self.ahead_s += max(0.0, ahead)
         return True
+
+    def summary(self) -> str:
+        return (f"yields={self.yields} away_s={self.away_s:.1f} max_away_s={self.max_away_s:.2f} "
+                f"ahead_s={self.ahead_s:.1f} room_s={self.room_s:.1f} barrier_s={self.barrier_s:.1f}")
 
 
 def _as_historical(s: Sample) -> Sample:

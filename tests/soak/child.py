@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import os
 import signal
 import sys
@@ -95,5 +96,16 @@ async def main(config: Path, keys: Path) -> int:
             out.flush()
 
 
+def info_logs() -> None:
+    """SOAK_LOG_INFO=edge.publish.replay,...: these loggers' INFO lines to stderr (the bench's daemon.log)."""
+    for name in filter(None, os.environ.get("SOAK_LOG_INFO", "").split(",")):
+        logger = logging.getLogger(name)
+        logger.setLevel(logging.INFO)
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter("%(created).3f %(name)s %(message)s"))
+        logger.addHandler(handler)
+
+
 if __name__ == "__main__":
+    info_logs()
     sys.exit(asyncio.run(main(Path(sys.argv[1]), Path(sys.argv[2]))))

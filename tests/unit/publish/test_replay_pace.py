@@ -335,3 +335,30 @@ def test_a_replay_that_empties_the_spool_calls_its_after_replay_hook_and_one_cut
     assert spool.rows == [] and calls == [0]
     calls, spool = asyncio.run(scenario(cut_short=True))
     assert spool.rows and calls == []
+
+
+def test_a_replay_logs_where_its_time_went(monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """The end log says how a replay's time was spent: its yields behind the pace and the loop's other work
+    while it waited (the live turns: the longest tells whether MAX_SLICE_S binds), sleeps ahead of the
+    pace, waits for the MQTT client's room and for barriers. On a slow host it told a replay that is
+    CPU-bound (live turns <= 0.14 s, no waits) from one held back by its slice (docs/performance.md)."""
+    clock = Clock(turn_s=0.1, row_s=0.003)  # 3 s of work for rows due over 1 s: behind the pace throughout
+    monkeypatch.setattr(replay, "FETCH_EACH_S", replay.FETCH_S)
+    monkeypatch.setattr(replay.time, "monotonic", clock.monotonic)
+    monkeypatch.setattr(replay.asyncio, "sleep", clock.sleep)
+    with caplog.at_level("INFO", logger="edge.publish.replay"):
+        link, spool = asyncio.run(_replay(clock))
+    assert spool.rows == [] and link.sent == ROWS
+    ended = [r.getMessage() for r in caplog.records if r.getMessage().startswith("spool replayed")]
+    assert len(ended) == 1
+    fields = dict(part.split("=") for part in ended[0].split()[2:])
+    assert fields["rows"] == str(ROWS) and fields["left"] == "0"
+    yields = int(fields["yields"])
+    assert 0 < yields < clock.yields  # the barriers' waits are not the pace's yields
+    # each yield lets one live turn run (and a barrier's wait, on this fake clock, may fall into it)
+    assert yields * clock.turn_s - 0.05 <= float(fields["away_s"]) <= yields * (clock.turn_s + BARRIER_S) + 0.05
+    assert float(fields["max_away_s"]) >= clock.turn_s - 0.005
+    assert float(fields["ahead_s"]) == 0.0  # never ahead of its pace: no sleep
+    assert float(fields["room_s"]) == 0.0  # the socket takes every byte at once
+    # the replay, its own work and its waits: the fields account for its seconds
+    assert float(fields["seconds"]) == pytest.approx(clock.now, abs=0.05)
