@@ -46,7 +46,8 @@ def runners(args: argparse.Namespace) -> dict[str, Callable[[], Result]]:
         "plantpage": lambda: plant_page.run(quick=args.quick),
         "opcua": lambda: opcua.run(quick=args.quick, machines=sizes[0] if sizes else None, duration_s=args.duration,
                                    repeats=args.repeat, diagnose=args.diagnose,
-                                   modes=tuple(args.modes.split(",")) if args.modes else opcua.MODES),
+                                   modes=tuple(args.modes.split(",")) if args.modes else opcua.MODES,
+                                   pin=args.pin, burn_cores=args.burn_cores, with_burst=not args.no_burst),
         "reload": lambda: reload.run(sizes=sizes, period_s=float(args.period) if args.period else None,
                                      duration_s=args.duration, quick=args.quick),
         "outage": lambda: outage.run(machines=sizes[0] if sizes else None,
@@ -83,6 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--modes", default="", metavar="MODES",
                         help=f"opcua: modes to run, comma separated, off among them ({', '.join(opcua.ALL_MODES)}; "
                              "default off,thread,loop)")
+    parser.add_argument("--pin", action="store_true",
+                        help="opcua: the daemon on CPU 0, every other process of the rig (simulators, broker, MQTT "
+                             "subscriber, OPC UA client) on CPU 1, in every mode (bench.pinning)")
+    parser.add_argument("--burn-cores", type=float, default=opcua.BURN_CORES, metavar="CORES",
+                        help=f"opcua: what mode burn's burner takes, share of one CPU (default {opcua.BURN_CORES})")
+    parser.add_argument("--no-burst", action="store_true",
+                        help="opcua: skip the 10,000-item burst after each window (shorter runs)")
     parser.add_argument("--diagnose", action="store_true",
                         help="fleet and opcua: run the daemon with bench.latency_daemon's probes (loop lag, GC "
                              "pauses, grid slots, stamp to outputs) and add their figures to each row")
