@@ -69,7 +69,9 @@ def test_a_process_gone_is_neither_pinned_nor_a_stray() -> None:
 
 
 @needs_two_cpus
-def test_burner_inherits_the_affinity_and_takes_about_its_share() -> None:
+def test_burner_inherits_the_affinity_and_burns() -> None:
+    """The burner runs where the bench process was pinned, and it burns CPU (how much of its share it gets
+    depends on the host's load: that is the bench's to report, not a test's to time)."""
     import psutil
 
     own = frozenset(os.sched_getaffinity(0))
@@ -84,11 +86,10 @@ def test_burner_inherits_the_affinity_and_takes_about_its_share() -> None:
         while process.cpu_times().user < 0.2 and time.monotonic() < deadline:  # past the interpreter's start
             time.sleep(0.05)
         assert pinning.affinities(burner.proc.pid) == {pinning.RIG_CPUS}
-        before, started = process.cpu_times(), time.monotonic()
-        time.sleep(1.0)
-        after = process.cpu_times()
-        share = (after.user + after.system - before.user - before.system) / (time.monotonic() - started)
-        assert 0.2 < share < 0.8
+        first = process.cpu_times().user
+        while process.cpu_times().user < first + 0.1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert process.cpu_times().user >= first + 0.1
     finally:
         burner.stop()
     assert burner.proc.returncode is not None
