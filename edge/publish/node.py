@@ -492,31 +492,40 @@ class SparkplugNode:
         """One DATA message of replayed rows, every metric is_historical, in chronological order.
 
         A GOOD value whose metric was GOOD when last published live is alias + timestamp + is_historical +
-        value; the rest goes through `_metric` (as a Sample), on a copy of the live quality bookkeeping (a
-        replay leaves it alone)."""
+        value: a float of a Double metric (most values) as its parts, no concatenation and no value writer
+        called (as `_data`); the rest goes through `_metric` (as a Sample), on a copy of the live quality
+        bookkeeping (a replay leaves it alone)."""
         parts = [dd.payload_head(self._clock())]
         append = parts.append
         headers = dd.SHORT_RECORD_HEADERS
         historical = dd.HISTORICAL
+        double, double_field = dd.DOUBLE_FIELD, dd.VALUE_FIELDS[MetricType.DOUBLE]
         slots, alias_data, alias_ends = dev.layout.slots, dev.alias_data, dev.alias_ends
-        not_good = set(dev.not_good)
+        not_good = set(dev.not_good) if dev.not_good else None  # copied only when a replay may change it
         good = int(Quality.GOOD)
         last_ts = -1
         stamp = b""
+        double_size = 0
         for name, value, _, ts, quality in sorted(rows, key=_row_timestamp):
             position, value_field, mtype = slots[name]
             alias = alias_data[alias_ends[position]:alias_ends[position + 1]]
             if ts != last_ts:
                 last_ts = ts
                 stamp = dd.timestamp_field(ts) + historical
-            if quality == good and value is not None and (not not_good or name not in not_good) \
-                    and (data := value_field(value)) is not None:
-                body = alias + stamp + data
-                try:
-                    append(headers[len(body)] + body)
-                except IndexError:  # a body of 128 bytes or more: a longer length varint
-                    append(dd.metric_record(body))
-                continue
+                double_size = len(stamp) + 9  # a double metric's body, but for its alias field
+            if quality == good and (not_good is None or name not in not_good):
+                if value_field is double_field and type(value) is float:
+                    parts += (headers[len(alias) + double_size], alias, stamp, double(0x69, value))
+                    continue
+                if value is not None and (data := value_field(value)) is not None:
+                    body = alias + stamp + data
+                    try:
+                        append(headers[len(body)] + body)
+                    except IndexError:  # a body of 128 bytes or more: a longer length varint
+                        append(dd.metric_record(body))
+                    continue
+            if not_good is None:
+                not_good = set()
             sample = Sample(name, value, mtype, ts, Quality(quality), True)
             append(self._metric(sample, alias + stamp[:-len(historical)], value_field, mtype, not_good))
         append(dd.payload_tail(self._next_seq()))  # last: a row that raises above takes no seq

@@ -26,6 +26,10 @@ _QUALITIES: dict[object, Quality] = {int(q): q for q in Quality}
 _LIST = {list}
 _ROW_LENGTH = {5}
 TIMESTAMP = itemgetter(3)
+# json.loads' own scanner (C), called on the body's text without loads' encoding sniffing, whitespace regexes
+# and exception wrapping: a third of a replayed row's parse. Only for a body as encode_samples writes it
+# (`_parse`); anything else goes through json.loads.
+_scan = json.JSONDecoder().scan_once  # type: ignore[attr-defined]  # set in its __init__: the C scanner
 
 
 def encode_samples(samples: Sequence[Sample]) -> bytes:
@@ -70,6 +74,23 @@ def _shaped(rows: list[object]) -> bool:
     return set(map(type, rows)) == _LIST and set(map(len, rows)) == _ROW_LENGTH  # type: ignore[arg-type]
 
 
+def _parse(body: bytes) -> object:
+    """json.loads(body), faster for a body as encode_samples writes it: ASCII JSON that starts with "[[" (no
+    byte-order mark, no NUL: loads reads it as UTF-8) and ends where the value ends. The scanner's result is
+    the one loads returns (loads is this scanner after a decode and a whitespace skip); a body it does not
+    take whole, or at all, goes through json.loads for its value or its error."""
+    if body.startswith(b"[["):
+        try:
+            text = body.decode("utf-8", "surrogatepass")
+            rows, end = _scan(text, 0)
+        except (StopIteration, ValueError):
+            pass
+        else:
+            if end == len(text):
+                return rows
+    return json.loads(body)
+
+
 class SpoolEntry:
     """One held batch with its row id (the replay order and the ack key): its `samples`, marked historical
     (the batch is replayed as such), or its stored body, read on demand as `rows()` or `samples`."""
@@ -102,7 +123,7 @@ class SpoolEntry:
         if self._body is None:
             return None
         try:
-            rows = json.loads(self._body)
+            rows = _parse(self._body)
         except (ValueError, UnicodeDecodeError):
             return None
         return rows if type(rows) is list and (not rows or _shaped(rows)) else None
