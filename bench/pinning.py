@@ -20,8 +20,9 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
+
+from bench.procs import REPO, python_env
 
 DAEMON_CPUS = frozenset({0})
 RIG_CPUS = frozenset({1})
@@ -92,7 +93,7 @@ class Burner:
 
     def __init__(self, cores: float) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "bench.pinning", "--cores", str(cores)],
-                                     stdin=subprocess.DEVNULL, cwd=Path(__file__).resolve().parent.parent)
+                                     stdin=subprocess.DEVNULL, cwd=REPO, env=python_env())
 
     def stop(self) -> None:
         if self.proc.poll() is None:
